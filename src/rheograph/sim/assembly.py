@@ -1,0 +1,124 @@
+"""Sparse resistance matrix R_FU in upper-triangular CSC form, assembled straight into its data array.
+
+Degrees of freedom: 3 per particle, ordered [Ux_0, Uy_0, w_0, Ux_1, ...].  The sparsity pattern holds the
+3x3 diagonal blocks (upper part) and one 3x3 block (rows of i, columns of j) for every candidate pair i < j
+of the neighbour list; candidate pairs that do not interact this step hold explicit zeros, so the pattern
+(and the symbolic factorisation) survives until the neighbour list is rebuilt.
+"""
+
+import numpy as np
+from numba import njit
+
+from rheograph.sim.lubrication import pair_block, strain_force
+
+
+@njit(cache=True)
+def build_pattern(pair_i, pair_j, n_particles):
+    """CSC pattern (indptr, indices) of the upper triangle and, per pair, the slot of its block in a column.
+
+    Pairs must be sorted by (j, i).  For pair p = (i, j) the entry (3i + r, 3j + q) lives at
+    ``indptr[3j + q] + pair_slot[p] + r``; particle j's diagonal entry (3j + r, 3j + q), r <= q, lives at
+    ``indptr[3j + q] + diag_slot[j] + r``.
+    """
+    ndof = 3 * n_particles
+    count = np.zeros(n_particles, dtype=np.int64)
+    npair = pair_i.shape[0]
+    pair_slot = np.empty(npair, dtype=np.int64)
+    for p in range(npair):
+        j = pair_j[p]
+        pair_slot[p] = 3 * count[j]
+        count[j] += 1
+    indptr = np.empty(ndof + 1, dtype=np.int64)
+    indptr[0] = 0
+    for j in range(n_particles):
+        for q in range(3):
+            indptr[3 * j + q + 1] = indptr[3 * j + q] + 3 * count[j] + q + 1
+    indices = np.empty(indptr[ndof], dtype=np.int64)
+    diag_slot = 3 * count
+    for p in range(npair):
+        i = pair_i[p]
+        j = pair_j[p]
+        for q in range(3):
+            base = indptr[3 * j + q] + pair_slot[p]
+            for r in range(3):
+                indices[base + r] = 3 * i + r
+    for j in range(n_particles):
+        for q in range(3):
+            base = indptr[3 * j + q] + diag_slot[j]
+            for r in range(q + 1):
+                indices[base + r] = 3 * j + r
+    return indptr, indices.astype(np.int32), pair_slot, diag_slot
+
+
+@njit(cache=True)
+def _add_diag_block(data, indptr, slot, j, R, off):
+    for q in range(3):
+        base = indptr[3 * j + q] + slot
+        for r in range(q + 1):
+            data[base + r] += R[off + r, off + q]
+
+
+@njit(cache=True)
+def assemble_resistance(
+    radii, pair_i, pair_j, nvec, dy, coeff, active, in_contact, indptr, pair_slot, diag_slot, nnz
+):
+    """Matrix data of R_FU and the unit-shear-rate right-hand side.
+
+    R_FU = one-body Stokes drag + lubrication blocks (0 < xi < gap cut-off) + contact-dashpot blocks (in
+    contact).  The unit-rate right-hand side (length 3N) holds R_FE : E_hat for lubricated pairs and, for
+    dashpots, -R_pair . (affine relative motion at unit rate), because the dashpot acts on the *total*
+    relative velocity.  E_hat has E_xy = E_yx = 1/2 and the affine rotation is -1/2 about z.
+    """
+    n = radii.shape[0]
+    data = np.zeros(nnz)
+    rhs_rate = np.zeros(3 * n)
+    for j in range(n):
+        a = radii[j]
+        for q in range(3):
+            base = indptr[3 * j + q] + diag_slot[j]
+            if q < 2:
+                data[base + q] += a
+            else:
+                data[base + 2] += (4.0 / 3.0) * a * a * a
+    for p in range(pair_i.shape[0]):
+        if not active[p]:
+            continue
+        i = pair_i[p]
+        j = pair_j[p]
+        nx = nvec[p, 0]
+        ny = nvec[p, 1]
+        R = pair_block(coeff[p], nx, ny)
+        _add_diag_block(data, indptr, diag_slot[i], i, R, 0)
+        _add_diag_block(data, indptr, diag_slot[j], j, R, 3)
+        for q in range(3):
+            base = indptr[3 * j + q] + pair_slot[p]
+            for r in range(3):
+                data[base + r] += R[r, 3 + q]
+        if in_contact[p]:
+            # affine motion at unit rate: j moves by dy e_x relative to i, both rotate at -1/2
+            for r in range(6):
+                f = -(R[r, 3] * dy[p] + R[r, 2] * -0.5 + R[r, 5] * -0.5)
+                if r < 3:
+                    rhs_rate[3 * i + r] += f
+                else:
+                    rhs_rate[3 * j + r - 3] += f
+        else:
+            g = strain_force(coeff[p], nx, ny, 0.0, 0.5, 0.0)
+            for r in range(3):
+                rhs_rate[3 * i + r] += g[r]
+                rhs_rate[3 * j + r] += g[3 + r]
+    return data, rhs_rate
+
+
+def dense_from_upper_csc(data, indices, indptr, ndof):
+    """Dense symmetric matrix from the upper CSC arrays (for tests and debugging only)."""
+    dense = np.zeros((ndof, ndof))
+    for col in range(ndof):
+        for k in range(indptr[col], indptr[col + 1]):
+            row = indices[k]
+            dense[row, col] += data[k]
+            if row != col:
+                dense[col, row] += data[k]
+    return dense
+
+

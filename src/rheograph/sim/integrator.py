@@ -1,0 +1,266 @@
+"""Time integration of the stress-controlled LF-DEM: one step = geometry -> CLM -> R_FU -> two solves ->
+shear rate from the stress target -> adaptive dt -> move.  No I/O here (see ``rheograph.sim.runner``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from rheograph.sim import contacts
+from rheograph.sim.assembly import assemble_resistance, build_pattern
+from rheograph.sim.geometry import neighbour_pairs, pair_geometry, wrap_offset, wrap_positions
+from rheograph.sim.init_config import random_configuration
+from rheograph.sim.lubrication import lubrication_resistance
+from rheograph.sim.params import SimParams
+from rheograph.sim.solver import make_solver
+from rheograph.sim.stress import pair_stress_sums, spring_stress, stress_unit_factor
+
+
+@dataclass
+class SimState:
+    """Everything needed to continue a run bit-for-bit (saved in checkpoints).
+
+    positions (N, 2) [a], radii (N,) [a], le_offset [a], time [6 pi eta0 a^2/F_CL], strain, steps;
+    the neighbour (Verlet) list pair_i/pair_j (P,), per-pair tangential stretch (P, 2) and contact state (P,),
+    and the bookkeeping of the list: non-affine displacement since it was built (N, 2), strain at build.
+    """
+
+    positions: np.ndarray
+    radii: np.ndarray
+    lx: float
+    ly: float
+    le_offset: float = 0.0
+    time: float = 0.0
+    strain: float = 0.0
+    steps: int = 0
+    pair_i: np.ndarray | None = None
+    pair_j: np.ndarray | None = None
+    stretch: np.ndarray | None = None
+    contact_state: np.ndarray | None = None
+    displacement: np.ndarray | None = None
+    strain_at_build: float = 0.0
+
+    ARRAYS = ("positions", "radii", "pair_i", "pair_j", "stretch", "contact_state", "displacement")
+    SCALARS = ("lx", "ly", "le_offset", "time", "strain", "steps", "strain_at_build")
+
+
+@dataclass
+class StepResult:
+    """Observables of one step.  Stresses in sigma0 as (xx, xy, yy); shear rate in gamma0_dot."""
+
+    dt: float
+    shear_rate: float
+    n_contacts: int
+    n_frictional: int
+    max_overlap: float
+    max_stretch: float
+    stress_lubrication: np.ndarray | None = None
+    stress_contact: np.ndarray | None = None
+    stress_solvent: np.ndarray | None = None
+
+    @property
+    def stress(self) -> np.ndarray:
+        return self.stress_lubrication + self.stress_contact + self.stress_solvent
+
+
+@njit(cache=True)
+def _transfer_contacts(old_i, old_j, old_stretch, old_state, new_i, new_j, n):
+    """Carry stretch and contact state from an old to a new neighbour list (both sorted by (j, i))."""
+    new_stretch = np.zeros((new_i.shape[0], 2))
+    new_state = np.zeros(new_i.shape[0], dtype=np.int8)
+    old_key = old_j * n + old_i
+    for p in range(new_i.shape[0]):
+        key = new_j[p] * n + new_i[p]
+        k = np.searchsorted(old_key, key)
+        if k < old_key.shape[0] and old_key[k] == key:
+            new_stretch[p, 0] = old_stretch[k, 0]
+            new_stretch[p, 1] = old_stretch[k, 1]
+            new_state[p] = old_state[k]
+    return new_stretch, new_state
+
+
+@njit(cache=True)
+def _move(pos, vel, displacement, shear_rate, dt):
+    """Explicit Euler move with the affine flow u = shear_rate * y e_x; returns max |non-affine disp.|."""
+    dmax = 0.0
+    for i in range(pos.shape[0]):
+        ux = vel[3 * i]
+        uy = vel[3 * i + 1]
+        pos[i, 0] += (ux + shear_rate * pos[i, 1]) * dt
+        pos[i, 1] += uy * dt
+        displacement[i, 0] += ux * dt
+        displacement[i, 1] += uy * dt
+        d = displacement[i, 0] ** 2 + displacement[i, 1] ** 2
+        if d > dmax:
+            dmax = d
+    return np.sqrt(dmax)
+
+
+@njit(cache=True)
+def _max_translation_speed(vel):
+    vmax = 0.0
+    for i in range(vel.shape[0] // 3):
+        v = vel[3 * i] ** 2 + vel[3 * i + 1] ** 2
+        if v > vmax:
+            vmax = v
+    return np.sqrt(vmax)
+
+
+class Simulation:
+    """A stress-controlled LF-DEM run of one state point.
+
+    >>> sim = Simulation(SimParams(n_particles=100, phi=0.7, stress=1.0))
+    >>> result = sim.step(record=True)
+    """
+
+    def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "qdldl"):
+        self.params = params
+        if state is None:
+            n_small, n_large = params.species_counts()
+            box = params.box_length()
+            pos, radii = random_configuration(
+                n_small, n_large, params.size_ratio, box, params.seed, params.relax_tolerance,
+                params.initial_min_gap,
+            )
+            state = SimState(positions=pos, radii=radii, lx=box, ly=box)
+        self.state = state
+        self.solver = make_solver(solver)
+        self.stress_factor = stress_unit_factor(state.lx, state.ly)
+        self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
+        self.max_displacement = 0.0
+        if state.pair_i is None:
+            self._rebuild_neighbours()
+        else:
+            self._analyze()
+        if state.displacement is not None:
+            self.max_displacement = float(np.sqrt((state.displacement**2).sum(axis=1).max()))
+
+    # ---- neighbour list and sparsity pattern --------------------------------------------------
+    def _rebuild_neighbours(self) -> None:
+        s, p = self.state, self.params
+        new_i, new_j = neighbour_pairs(
+            s.positions, s.radii, s.lx, s.ly, s.le_offset, p.lub_max_gap, p.neighbour_skin
+        )
+        n = s.radii.shape[0]
+        if s.pair_i is None:
+            s.stretch = np.zeros((new_i.shape[0], 2))
+            s.contact_state = np.zeros(new_i.shape[0], dtype=np.int8)
+        else:
+            s.stretch, s.contact_state = _transfer_contacts(
+                s.pair_i, s.pair_j, s.stretch, s.contact_state, new_i, new_j, n
+            )
+        s.pair_i, s.pair_j = new_i, new_j
+        s.displacement = np.zeros((n, 2))
+        s.strain_at_build = s.strain
+        self.max_displacement = 0.0
+        self._analyze()
+
+    def _analyze(self) -> None:
+        s = self.state
+        n = s.radii.shape[0]
+        self.indptr, self.indices, self.pair_slot, self.diag_slot = build_pattern(s.pair_i, s.pair_j, n)
+        self.solver.analyze(self.indptr, self.indices, 3 * n)
+
+    def _list_is_stale(self) -> bool:
+        # two particles approach by at most twice the largest non-affine displacement plus the affine
+        # relative motion over the accumulated strain, |d strain| * (longest listed distance)
+        drift = 2.0 * self.max_displacement
+        drift += abs(self.state.strain - self.state.strain_at_build) * (
+            self.list_cutoff + self.params.neighbour_skin
+        )
+        return drift >= self.params.neighbour_skin
+
+    # ---- one time step -----------------------------------------------------------------------
+    def step(self, record: bool = False) -> StepResult:
+        """Advance one explicit-Euler step; ``record`` computes the full stress tensors."""
+        s, p = self.state, self.params
+        if self._list_is_stale():
+            self._rebuild_neighbours()
+        radii = s.radii
+        nvec, r, xi, dy = pair_geometry(s.positions, radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset)
+        kn, kt = p.kn, p.kt
+        n_frictional = contacts.critical_load_update(
+            radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, kn, kt, p.mu, p.critical_load
+        )
+        in_contact = xi <= 0.0
+        lubricated = (xi > 0.0) & (xi < p.lub_max_gap)
+        active = in_contact | lubricated
+        coeff = lubrication_resistance(radii, s.pair_i, s.pair_j, xi, active, p.delta)
+        data, rhs_rate = assemble_resistance(
+            radii, s.pair_i, s.pair_j, nvec, dy, coeff, active, in_contact,
+            self.indptr, self.pair_slot, self.diag_slot, self.indices.shape[0],
+        )
+        rhs_const = np.zeros(3 * radii.shape[0])
+        f_on_i = contacts.contact_spring_forces(
+            radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, kn, kt, rhs_const
+        )
+        self.solver.factorize(data)
+        vel_const = self.solver.solve(rhs_const)
+        vel_rate = self.solver.solve(rhs_rate)
+
+        # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
+        lub0, dash0 = pair_stress_sums(
+            vel_const, 0.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact, record
+        )
+        lub1, dash1 = pair_stress_sums(
+            vel_rate, 1.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact, record
+        )
+        spring = spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, record)
+        f = self.stress_factor
+        solvent_unit = np.array([0.0, 1.0, 0.0])  # 2 eta0 E at unit rate, in sigma0
+        s0_xy = f * (lub0[1] + dash0[1] + spring[1])
+        s1_xy = f * (lub1[1] + dash1[1]) + 1.0
+        shear_rate = (p.stress - s0_xy) / s1_xy
+        vel = vel_const + shear_rate * vel_rate
+
+        # adaptive step: no particle, pair separation, contact point or strain increment may move more
+        # than disp_max (physics.md §3.4; LF_DEM also limits the normal approach speed of pairs)
+        vmax = max(
+            _max_translation_speed(vel),
+            contacts.max_interaction_speed(
+                vel, radii, s.pair_i, s.pair_j, nvec, dy, active, s.contact_state, shear_rate
+            ),
+            abs(shear_rate),
+        )
+        dt = p.disp_max / vmax if vmax > 0.0 else p.dt_max
+        dt = min(dt, p.dt_max)
+
+        result = StepResult(
+            dt=dt,
+            shear_rate=shear_rate,
+            n_contacts=int(in_contact.sum()),
+            n_frictional=n_frictional,
+            max_overlap=float(max(0.0, -(xi * 0.5 * (radii[s.pair_i] + radii[s.pair_j])).min()))
+            if xi.shape[0]
+            else 0.0,
+            max_stretch=float(np.sqrt((s.stretch**2).sum(axis=1)).max()) if xi.shape[0] else 0.0,
+        )
+        if record:
+            result.stress_lubrication = f * (lub0 + shear_rate * lub1)
+            result.stress_contact = f * (spring + dash0 + shear_rate * dash1)
+            result.stress_solvent = shear_rate * solvent_unit
+
+        contacts.increment_stretch(
+            vel, radii, s.pair_i, s.pair_j, nvec, dy, s.contact_state, s.stretch, shear_rate, dt
+        )
+        self.max_displacement = _move(s.positions, vel, s.displacement, shear_rate, dt)
+        s.le_offset = wrap_offset(s.le_offset + shear_rate * s.ly * dt, s.lx)
+        wrap_positions(s.positions, s.lx, s.ly, s.le_offset)
+        s.time += dt
+        s.strain += shear_rate * dt
+        s.steps += 1
+        return result
+
+
+def viscosity(result: StepResult) -> float:
+    """Instantaneous relative viscosity sigma_xy / (eta0 shear_rate) (inf/negative values are kept)."""
+    return result.stress[1] / result.shear_rate if result.shear_rate != 0.0 else math.inf
+
+
+def particle_pressure(result: StepResult) -> float:
+    """Pi = -(sigma_xx + sigma_yy + sigma_zz)/3 with sigma_zz = 0 (seed paper / LF_DEM convention)."""
+    st = result.stress
+    return -(st[0] + st[2]) / 3.0

@@ -1,0 +1,127 @@
+"""Simulation parameters with validation.  Defaults follow physics.md (LF_DEM's CLM 2D set-up)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+INTEGRATORS = ("euler", "heun")
+
+
+class ParameterError(ValueError):
+    """A simulation parameter is outside its allowed range."""
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """All physical and numerical parameters of one state point.
+
+    Units: length a (small radius), force F_CL, stress sigma0 = F_CL/(6 pi a^2), time 6 pi eta0 a^2 / F_CL.
+    """
+
+    n_particles: int = 400  # total particle count N (bidisperse, equal area of each species)
+    phi: float = 0.76  # area fraction sum(pi a_i^2) / (Lx Ly)
+    stress: float = 10.0  # imposed shear stress sigma / sigma0
+    seed: int = 1  # RNG seed of the initial configuration
+    strain: float = 5.0  # total strain to run
+    size_ratio: float = 1.4  # large / small radius
+    mu: float = 0.5  # friction coefficient (CLM), 0 for frictionless
+    critical_load: float = 1.0  # F_CL in force units (the unit itself; kept explicit for clarity)
+    lub_max_gap: float = 0.5  # lubrication cut-off, reduced gap h / a_bar
+    delta: float = 1e-3  # lubrication regularisation (h_min / a_bar)
+    kn_coefficient: float = 2e4  # k_n = kn_coefficient * (sigma/sigma0) / (6 pi)  [F_CL / a]
+    kt_ratio: float = 0.5  # k_t / k_n
+    disp_max: float = 1e-3  # max displacement per step [a]
+    integrator: str = "euler"  # "euler" (LF_DEM) or "heun" (predictor-corrector)
+    dt_max: float = 1.0  # cap on dt when all velocities vanish [6 pi eta0 a^2 / F_CL]
+    neighbour_skin: float = 0.4  # Verlet skin [a]; the matrix pattern lives as long as the list
+    output_interval: float = 0.01  # strain between time-series rows
+    snapshot_interval: float = 0.5  # strain between configuration snapshots
+    steady_state_strain: float = 1.0  # strain after which averages are taken
+    jam_viscosity: float = 1e5  # apparent viscosity above which an output interval counts as jammed
+    jam_intervals: int = 100  # consecutive jammed output intervals that end the run as shear-jammed
+    max_wall_seconds: float = 0.0  # wall-clock budget of one invocation (0: unlimited); resumable
+    checkpoint_wall_seconds: float = 60.0  # wall seconds between checkpoints
+    relax_tolerance: float = 1e-4  # max overlap [a] accepted for the initial configuration
+    initial_min_gap: float = 0.01  # radii inflated by (1 + this) while relaxing, so gaps start open
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    # ---- derived quantities -------------------------------------------------------------------
+    @property
+    def kn(self) -> float:
+        return self.kn_coefficient * self.stress / (6.0 * math.pi)
+
+    @property
+    def kt(self) -> float:
+        return self.kt_ratio * self.kn
+
+    def species_counts(self) -> tuple[int, int]:
+        """(n_small, n_large) with equal area of each species: n_s = size_ratio^2 n_l."""
+        n_large = round(self.n_particles / (1.0 + self.size_ratio**2))
+        return self.n_particles - n_large, n_large
+
+    def box_length(self) -> float:
+        n_small, n_large = self.species_counts()
+        area = math.pi * (n_small + n_large * self.size_ratio**2)
+        return math.sqrt(area / self.phi)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_mapping(cls, mapping) -> SimParams:
+        """Build from a dict-like (e.g. a Hydra ``sim`` node); unknown keys are an error."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(mapping) - names)
+        if unknown:
+            raise ParameterError(
+                f"unknown simulation parameter(s) {unknown}; allowed: {sorted(names)}"
+            )
+        return cls(**{k: mapping[k] for k in mapping})
+
+    # ---- validation ----------------------------------------------------------------------------
+    def validate(self) -> None:
+        def check(name, ok, allowed):
+            value = getattr(self, name)
+            if isinstance(value, float) and not math.isfinite(value):
+                ok = False
+            if not ok:
+                raise ParameterError(f"sim.{name}={value!r} is invalid: allowed {allowed}")
+
+        check("phi", 0.0 < self.phi < 0.9, "0 < phi < 0.9")
+        check("stress", self.stress > 0.0, "stress > 0 (in units of sigma0)")
+        check("size_ratio", 1.0 <= self.size_ratio <= 10.0, "1 <= size_ratio <= 10")
+        check("strain", self.strain > 0.0, "strain > 0")
+        check("mu", self.mu >= 0.0, "mu >= 0")
+        check("critical_load", self.critical_load > 0.0, "critical_load > 0")
+        check("lub_max_gap", 0.0 < self.lub_max_gap < 1.0, "0 < lub_max_gap < 1")
+        check("delta", 0.0 < self.delta < 0.1, "0 < delta < 0.1")
+        check("kn_coefficient", self.kn_coefficient > 0.0, "kn_coefficient > 0")
+        check("kt_ratio", self.kt_ratio >= 0.0, "kt_ratio >= 0")
+        check("disp_max", 0.0 < self.disp_max <= 0.05, "0 < disp_max <= 0.05")
+        check("integrator", self.integrator in INTEGRATORS, f"one of {INTEGRATORS}")
+        check("dt_max", self.dt_max > 0.0, "dt_max > 0")
+        check("neighbour_skin", 0.0 < self.neighbour_skin <= 2.0, "0 < neighbour_skin <= 2")
+        check("output_interval", 0.0 < self.output_interval <= self.strain, "0 < output_interval <= strain")
+        check("snapshot_interval", self.snapshot_interval > 0.0, "snapshot_interval > 0")
+        check("steady_state_strain", self.steady_state_strain >= 0.0, "steady_state_strain >= 0")
+        check("jam_viscosity", self.jam_viscosity > 1.0, "jam_viscosity > 1")
+        check("jam_intervals", self.jam_intervals >= 1, "jam_intervals >= 1")
+        check("max_wall_seconds", self.max_wall_seconds >= 0.0, "max_wall_seconds >= 0 (0: unlimited)")
+        check("checkpoint_wall_seconds", self.checkpoint_wall_seconds > 0.0, "checkpoint_wall_seconds > 0")
+        check("relax_tolerance", self.relax_tolerance > 0.0, "relax_tolerance > 0")
+        check("initial_min_gap", 0.0 <= self.initial_min_gap <= 0.1, "0 <= initial_min_gap <= 0.1")
+        check("seed", isinstance(self.seed, int) and self.seed >= 0, "integer seed >= 0")
+        check("n_particles", isinstance(self.n_particles, int) and self.n_particles >= 2, "integer >= 2")
+        # the minimum image must be unique for the longest interaction (two large particles + gap + skin)
+        cutoff = 2.0 * self.size_ratio * (1.0 + 0.5 * self.lub_max_gap) + self.neighbour_skin
+        if self.box_length() < 2.0 * cutoff:
+            n_min = math.ceil(self.n_particles * (2.0 * cutoff / self.box_length()) ** 2)
+            raise ParameterError(
+                f"sim.n_particles={self.n_particles} is too small for the interaction cut-off at "
+                f"phi={self.phi}: the box (L={self.box_length():.2f}) must be at least twice the cut-off "
+                f"({cutoff:.2f}); use n_particles >= {n_min}"
+            )
