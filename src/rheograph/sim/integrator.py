@@ -60,6 +60,8 @@ class StepResult:
     stress_lubrication: np.ndarray | None = None
     stress_contact: np.ndarray | None = None
     stress_solvent: np.ndarray | None = None
+    contacts: tuple | None = None  # (pairs (M, 2), state (M,), stretch (M, 2)) at this configuration
+
 
     @property
     def stress(self) -> np.ndarray:
@@ -175,7 +177,7 @@ class Simulation:
 
     # ---- one time step -----------------------------------------------------------------------
     def step(self, record: bool = False) -> StepResult:
-        """Advance one explicit-Euler step; ``record`` computes the full stress tensors."""
+        """Advance one explicit-Euler step; ``record`` adds the full stress tensors and the contact list."""
         s, p = self.state, self.params
         if self._list_is_stale():
             self._rebuild_neighbours()
@@ -239,6 +241,12 @@ class Simulation:
             max_stretch=float(np.sqrt((s.stretch**2).sum(axis=1)).max()) if xi.shape[0] else 0.0,
         )
         if record:
+            touching = s.contact_state != contacts.NONE
+            result.contacts = (
+                np.stack([s.pair_i[touching], s.pair_j[touching]], axis=1),
+                s.contact_state[touching].copy(),
+                s.stretch[touching].copy(),
+            )
             result.stress_lubrication = f * (lub0 + shear_rate * lub1)
             result.stress_contact = f * (spring + dash0 + shear_rate * dash1)
             result.stress_solvent = shear_rate * solvent_unit

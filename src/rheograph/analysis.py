@@ -1,0 +1,61 @@
+"""Steady-state statistics shared by the simulator's summaries, flow curves and reference comparisons."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def steady_state_summary(
+    strain: np.ndarray,
+    time: np.ndarray,
+    pressure: np.ndarray,
+    z_mu: np.ndarray,
+    z: np.ndarray,
+    stress: float,
+    strain_min: float,
+    n_blocks: int = 5,
+) -> dict:
+    """Means over the rows with strain >= strain_min of a strain-sampled time series.
+
+    eta_r = sigma * (time elapsed) / (strain accumulated): the time average of the shear rate gives the
+    steady viscosity (equal to the strain-weighted mean of the instantaneous sigma/shear_rate).
+    Standard errors come from ``n_blocks`` consecutive blocks of equal row count.
+    Returns NaN entries (never fabricated numbers) when the window holds fewer than 2 rows per block.
+    """
+    keep = strain >= strain_min
+    out = {"strain_window": float(strain[keep][-1] - strain[keep][0]) if keep.sum() > 1 else 0.0}
+    names = ("viscosity", "pressure", "z_mu", "z")
+    if keep.sum() < 2 * n_blocks:
+        for name in names:
+            out[name] = out[name + "_se"] = float("nan")
+        out["n_rows"] = int(keep.sum())
+        return out
+    s, t = strain[keep], time[keep]
+    blocks = np.array_split(np.arange(s.shape[0]), n_blocks)
+
+    def eta(idx):
+        return stress * (t[idx[-1]] - t[idx[0]]) / (s[idx[-1]] - s[idx[0]])
+
+    out["viscosity"] = float(stress * (t[-1] - t[0]) / (s[-1] - s[0]))
+    out["viscosity_se"] = float(np.std([eta(b) for b in blocks], ddof=1) / np.sqrt(n_blocks))
+    for name, series in (("pressure", pressure), ("z_mu", z_mu), ("z", z)):
+        x = series[keep]
+        out[name] = float(x.mean())
+        out[name + "_se"] = float(np.std([x[b].mean() for b in blocks], ddof=1) / np.sqrt(n_blocks))
+    out["n_rows"] = int(keep.sum())
+    return out
+
+
+def read_lfdem_data(path) -> dict:
+    """Columns of an LF_DEM ``data_*.dat`` time series (see shared/reference/README.md)."""
+    table = np.loadtxt(path, comments="#")
+    return {
+        "time": table[:, 0],
+        "strain": table[:, 1],
+        "shear_rate": table[:, 2],
+        "viscosity": table[:, 3],
+        "pressure": table[:, 11],
+        "z": table[:, 17],
+        "z_mu": table[:, 18],
+        "dt": table[:, 22],
+    }

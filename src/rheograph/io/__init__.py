@@ -1,0 +1,1 @@
+"""HDF5 storage of trajectories (time series, snapshots, checkpoints)."""

@@ -1,0 +1,203 @@
+"""Trajectory files: one HDF5 file per state point (schema in docs/data_format.md).
+
+Layout (schema_version 1):
+  /                attrs: schema_version, producer, status, params (each SimParams field), lx, ly
+  /radii           (N,) particle radii [a]
+  /timeseries/*    one row per output step (resizable 1-D or (rows, 3) datasets)
+  /snapshots/*     one entry per snapshot: positions (S, N, 2), scalars, and the contact list flattened
+                   with contact_offset (S + 1,) indexing contact_pairs (M, 2), contact_state, contact_stretch
+  /checkpoint/*    the SimState needed to resume bit-for-bit, plus the row counts it is consistent with
+  /summary         attrs: steady-state means and standard errors (written when the run ends)
+
+Rows written after the last checkpoint are dropped on resume and recomputed (the dynamics are
+deterministic), so an interrupted run loses and duplicates nothing.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rheograph.sim.integrator import SimState
+from rheograph.sim.params import SimParams
+
+SCHEMA_VERSION = 1
+PRODUCER = "rheograph"
+
+TIMESERIES_SCALARS = (
+    "time", "strain", "shear_rate", "viscosity", "pressure", "z_mu", "z", "max_overlap", "max_stretch",
+    "dt", "steps", "jammed",
+)
+TIMESERIES_TENSORS = ("stress", "stress_lubrication", "stress_contact", "stress_solvent")
+SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "pressure", "z_mu", "z")
+# parameters that may change between invocations of the same run (they do not alter the physics)
+RESUMABLE_PARAMS = {"strain", "max_wall_seconds", "checkpoint_wall_seconds", "jam_intervals"}
+
+
+class TrajectoryFileError(RuntimeError):
+    """A trajectory file is corrupt, foreign, or belongs to another state point."""
+
+
+def _append(ds: h5py.Dataset, values) -> None:
+    values = np.asarray(values, dtype=ds.dtype)
+    n = ds.shape[0]
+    ds.resize(n + values.shape[0], axis=0)
+    ds[n:] = values
+
+
+class TrajectoryFile:
+    """Writer/reader of one state point's trajectory file."""
+
+    def __init__(self, path: str | Path, params: SimParams):
+        self.path = Path(path)
+        self.params = params
+        self.h5: h5py.File | None = None
+
+    # ---- opening -----------------------------------------------------------------------------
+    def open_new(self, state: SimState) -> None:
+        tmp = self.path.with_suffix(self.path.suffix + ".tmp")
+        with h5py.File(tmp, "w") as h5:
+            h5.attrs["schema_version"] = SCHEMA_VERSION
+            h5.attrs["producer"] = PRODUCER
+            h5.attrs["status"] = "running"
+            h5.attrs["params"] = json.dumps(self.params.to_dict())
+            for key, value in self.params.to_dict().items():
+                h5.attrs[f"param_{key}"] = value
+            h5.attrs["lx"] = state.lx
+            h5.attrs["ly"] = state.ly
+            h5.create_dataset("radii", data=state.radii)
+            n = state.radii.shape[0]
+            ts = h5.create_group("timeseries")
+            for name in TIMESERIES_SCALARS:
+                dtype = np.int64 if name == "steps" else (np.bool_ if name == "jammed" else np.float64)
+                ts.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(1024,))
+            for name in TIMESERIES_TENSORS:
+                ts.create_dataset(name, shape=(0, 3), maxshape=(None, 3), dtype=np.float64, chunks=(1024, 3))
+            ts.attrs["tensor_components"] = "xx, xy, yy (sigma_zz = 0); stresses in sigma0"
+            sn = h5.create_group("snapshots")
+            for name in SNAPSHOT_SCALARS:
+                sn.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,))
+            sn.create_dataset(
+                "positions", shape=(0, n, 2), maxshape=(None, n, 2), dtype=np.float64, chunks=(1, n, 2)
+            )
+            sn.create_dataset("contact_offset", data=np.zeros(1, dtype=np.int64), maxshape=(None,), chunks=(64,))
+            sn.create_dataset("contact_pairs", shape=(0, 2), maxshape=(None, 2), dtype=np.int64, chunks=(1024, 2))
+            sn.create_dataset("contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,))
+            sn.create_dataset(
+                "contact_stretch", shape=(0, 2), maxshape=(None, 2), dtype=np.float64, chunks=(1024, 2)
+            )
+            h5.create_group("checkpoint")
+        tmp.replace(self.path)  # the file appears only once it is a valid, empty trajectory
+        self.h5 = h5py.File(self.path, "r+")
+        self.write_checkpoint(state, {})
+
+    def open_existing(self) -> tuple[SimState, dict]:
+        """Open for resuming; verify the file and return (state, runner counters) from the checkpoint."""
+        try:
+            h5 = h5py.File(self.path, "r+")
+        except OSError as exc:
+            raise TrajectoryFileError(f"{self.path}: not a readable HDF5 file ({exc}); move it away") from exc
+        if h5.attrs.get("producer") != PRODUCER or "checkpoint" not in h5:
+            h5.close()
+            raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
+        version = int(h5.attrs.get("schema_version", -1))
+        if version != SCHEMA_VERSION:
+            h5.close()
+            raise TrajectoryFileError(
+                f"{self.path}: schema_version {version}, this rheograph writes {SCHEMA_VERSION}"
+            )
+        stored = json.loads(h5.attrs["params"])
+        mine = self.params.to_dict()
+        differ = sorted(k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k) != mine[k])
+        if differ:
+            h5.close()
+            detail = ", ".join(f"{k}: file {stored.get(k)!r} vs requested {mine[k]!r}" for k in differ)
+            raise TrajectoryFileError(f"{self.path} belongs to another state point ({detail})")
+        cp = h5["checkpoint"]
+        if "positions" not in cp:
+            h5.close()
+            raise TrajectoryFileError(f"{self.path}: checkpoint is incomplete; move the file away")
+        state = SimState(
+            **{name: cp[name][()] for name in SimState.ARRAYS},
+            **{name: cp.attrs[name] for name in SimState.SCALARS},
+        )
+        state.steps = int(state.steps)
+        counters = json.loads(cp.attrs["counters"])
+        # drop rows written after the checkpoint: they will be recomputed identically
+        for name in TIMESERIES_SCALARS + TIMESERIES_TENSORS:
+            h5["timeseries"][name].resize(counters["rows"], axis=0)
+        sn = h5["snapshots"]
+        for name in (*SNAPSHOT_SCALARS, "positions"):
+            sn[name].resize(counters["snapshots"], axis=0)
+        sn["contact_offset"].resize(counters["snapshots"] + 1, axis=0)
+        n_contacts = int(sn["contact_offset"][-1])
+        for name in ("contact_pairs", "contact_state", "contact_stretch"):
+            sn[name].resize(n_contacts, axis=0)
+        h5.attrs["status"] = "running"
+        self.h5 = h5
+        return state, counters
+
+    # ---- writing ------------------------------------------------------------------------------
+    def append_row(self, row: dict) -> None:
+        ts = self.h5["timeseries"]
+        for name in TIMESERIES_SCALARS:
+            _append(ts[name], [row[name]])
+        for name in TIMESERIES_TENSORS:
+            _append(ts[name], [row[name]])
+
+    def append_snapshot(self, snap: dict) -> None:
+        sn = self.h5["snapshots"]
+        for name in SNAPSHOT_SCALARS:
+            _append(sn[name], [snap[name]])
+        _append(sn["positions"], snap["positions"][None])
+        _append(sn["contact_pairs"], snap["contact_pairs"])
+        _append(sn["contact_state"], snap["contact_state"])
+        _append(sn["contact_stretch"], snap["contact_stretch"])
+        _append(sn["contact_offset"], [sn["contact_pairs"].shape[0]])
+
+    def write_checkpoint(self, state: SimState, counters: dict) -> None:
+        counters = {
+            "rows": self.h5["timeseries"]["time"].shape[0],
+            "snapshots": self.h5["snapshots"]["time"].shape[0],
+            **{k: v for k, v in counters.items() if k not in ("rows", "snapshots")},
+        }
+        cp = self.h5["checkpoint"]
+        for name in SimState.ARRAYS:
+            if name in cp:
+                del cp[name]
+            cp.create_dataset(name, data=getattr(state, name))
+        for name in SimState.SCALARS:
+            cp.attrs[name] = getattr(state, name)
+        cp.attrs["counters"] = json.dumps(counters)
+        self.h5.flush()
+
+    def finish(self, status: str, summary: dict) -> None:
+        self.h5.attrs["status"] = status
+        grp = self.h5.require_group("summary")
+        for key, value in summary.items():
+            grp.attrs[key] = value
+        self.h5.flush()
+
+    def close(self) -> None:
+        if self.h5 is not None:
+            self.h5.close()
+            self.h5 = None
+
+
+def read_timeseries(path: str | Path) -> dict:
+    with h5py.File(path, "r") as h5:
+        return {name: h5["timeseries"][name][()] for name in h5["timeseries"]}
+
+
+def read_run_info(path: str | Path) -> dict:
+    """Status, parameters and summary of a trajectory file."""
+    with h5py.File(path, "r") as h5:
+        return {
+            "status": h5.attrs["status"],
+            "params": json.loads(h5.attrs["params"]),
+            "summary": dict(h5["summary"].attrs) if "summary" in h5 else {},
+            "strain": float(h5["checkpoint"].attrs["strain"]),
+        }
