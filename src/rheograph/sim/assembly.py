@@ -9,7 +9,7 @@ of the neighbour list; candidate pairs that do not interact this step hold expli
 import numpy as np
 from numba import njit
 
-from rheograph.sim.lubrication import pair_block, strain_force
+from rheograph.sim.lubrication import contact_block, pair_block, strain_force
 
 
 @njit(cache=True)
@@ -60,7 +60,8 @@ def _add_diag_block(data, indptr, slot, j, R, off):
 
 @njit(cache=True)
 def assemble_resistance(
-    radii, pair_i, pair_j, nvec, dy, coeff, active, in_contact, indptr, pair_slot, diag_slot, nnz
+    radii, pair_i, pair_j, nvec, dy, coeff, active, in_contact, k_normal, k_tangential,
+    indptr, pair_slot, diag_slot, nnz,
 ):
     """Matrix data of R_FU and the unit-shear-rate right-hand side.
 
@@ -68,6 +69,8 @@ def assemble_resistance(
     contact).  The unit-rate right-hand side (length 3N) holds R_FE : E_hat for lubricated pairs and, for
     dashpots, -R_pair . (affine relative motion at unit rate), because the dashpot acts on the *total*
     relative velocity.  E_hat has E_xy = E_yx = 1/2 and the affine rotation is -1/2 about z.
+    Contact blocks include dt * spring stiffness (``k_normal``, ``k_tangential`` per pair) for the linearly
+    implicit integrator (zeros for explicit Euler); like the dashpot, they act on the total motion.
     """
     n = radii.shape[0]
     data = np.zeros(nnz)
@@ -87,7 +90,10 @@ def assemble_resistance(
         j = pair_j[p]
         nx = nvec[p, 0]
         ny = nvec[p, 1]
-        R = pair_block(coeff[p], nx, ny)
+        if in_contact[p]:
+            R = contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p])
+        else:
+            R = pair_block(coeff[p], nx, ny)
         _add_diag_block(data, indptr, diag_slot[i], i, R, 0)
         _add_diag_block(data, indptr, diag_slot[j], j, R, 3)
         for q in range(3):

@@ -1,5 +1,16 @@
 """Time integration of the stress-controlled LF-DEM: one step = geometry -> CLM -> R_FU -> two solves ->
-shear rate from the stress target -> adaptive dt -> move.  No I/O here (see ``rheograph.sim.runner``)."""
+shear rate from the stress target -> adaptive dt -> move.  No I/O here (see ``rheograph.runner``).
+
+Integrators:
+- ``euler``: explicit Euler as in LF_DEM; contact springs enter with their value at the start of the step.
+- ``implicit``: linearly implicit Euler for the contact springs.  The tangential spring of a sticking
+  contact relaxes on a time R_t / (k_t a_bar) ~ 1e-4 at the default stiffness, shorter than the
+  displacement-limited dt, so explicit Euler lets sticking contacts rattle at the edge of stability (one
+  cause of its disp_max-dependent viscosity).  Here the spring change over the step, dt * K * U, is moved
+  into the resistance matrix (one extra PSD block per contact, same factorisation, same cost per step).
+  dt is not known before the solve, so K uses the previous step's dt (times ``DT_GROWTH``) and the step
+  actually taken is never longer than that: the implicit weight dt_assumed / dt >= 1 keeps it stable.
+"""
 
 from __future__ import annotations
 
@@ -42,9 +53,10 @@ class SimState:
     contact_state: np.ndarray | None = None
     displacement: np.ndarray | None = None
     strain_at_build: float = 0.0
+    dt_assumed: float = 0.0
 
     ARRAYS = ("positions", "radii", "pair_i", "pair_j", "stretch", "contact_state", "displacement")
-    SCALARS = ("lx", "ly", "le_offset", "time", "strain", "steps", "strain_at_build")
+    SCALARS = ("lx", "ly", "le_offset", "time", "strain", "steps", "strain_at_build", "dt_assumed")
 
 
 @dataclass
@@ -111,6 +123,9 @@ def _max_translation_speed(vel):
     return np.sqrt(vmax)
 
 
+DT_GROWTH = 1.2  # largest growth of dt between steps of the implicit integrator
+
+
 class Simulation:
     """A stress-controlled LF-DEM run of one state point.
 
@@ -133,6 +148,9 @@ class Simulation:
         self.stress_factor = stress_unit_factor(state.lx, state.ly)
         self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
         self.max_displacement = 0.0
+        # dt assumed by the implicit spring terms; saved in checkpoints via SimState.dt_assumed
+        if state.dt_assumed <= 0.0:
+            state.dt_assumed = params.disp_max
         if state.pair_i is None:
             self._rebuild_neighbours()
         else:
@@ -166,6 +184,18 @@ class Simulation:
         self.indptr, self.indices, self.pair_slot, self.diag_slot = build_pattern(s.pair_i, s.pair_j, n)
         self.solver.analyze(self.indptr, self.indices, 3 * n)
 
+    def _implicit_stiffness(self, in_contact: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per pair dt * stiffness of the springs treated implicitly (zeros for explicit Euler)."""
+        s, p = self.state, self.params
+        npair = s.pair_i.shape[0]
+        if p.integrator == "euler":
+            zeros = np.zeros(npair)
+            return zeros, zeros
+        abar = 0.5 * (s.radii[s.pair_i] + s.radii[s.pair_j])
+        k_normal = np.where(in_contact, p.kn * abar * s.dt_assumed, 0.0)
+        k_tangential = np.where(s.contact_state == contacts.STICK, p.kt * abar * s.dt_assumed, 0.0)
+        return k_normal, k_tangential
+
     def _list_is_stale(self) -> bool:
         # two particles approach by at most twice the largest non-affine displacement plus the affine
         # relative motion over the accumulated strain, |d strain| * (longest listed distance)
@@ -191,8 +221,9 @@ class Simulation:
         lubricated = (xi > 0.0) & (xi < p.lub_max_gap)
         active = in_contact | lubricated
         coeff = lubrication_resistance(radii, s.pair_i, s.pair_j, xi, active, p.delta)
+        k_normal, k_tangential = self._implicit_stiffness(in_contact)
         data, rhs_rate = assemble_resistance(
-            radii, s.pair_i, s.pair_j, nvec, dy, coeff, active, in_contact,
+            radii, s.pair_i, s.pair_j, nvec, dy, coeff, active, in_contact, k_normal, k_tangential,
             self.indptr, self.pair_slot, self.diag_slot, self.indices.shape[0],
         )
         rhs_const = np.zeros(3 * radii.shape[0])
@@ -205,10 +236,12 @@ class Simulation:
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
         lub0, dash0 = pair_stress_sums(
-            vel_const, 0.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact, record
+            vel_const, 0.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact,
+            k_normal, k_tangential, record,
         )
         lub1, dash1 = pair_stress_sums(
-            vel_rate, 1.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact, record
+            vel_rate, 1.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact,
+            k_normal, k_tangential, record,
         )
         spring = spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, record)
         f = self.stress_factor
@@ -229,6 +262,9 @@ class Simulation:
         )
         dt = p.disp_max / vmax if vmax > 0.0 else p.dt_max
         dt = min(dt, p.dt_max)
+        if p.integrator == "implicit":
+            dt = min(dt, s.dt_assumed)
+            s.dt_assumed = min(DT_GROWTH * dt, p.dt_max)
 
         result = StepResult(
             dt=dt,

@@ -175,3 +175,24 @@ def strain_force(coeff, nx, ny, exx, exy, eyy):
     out[4] = gx_j * nen * ny + gy_j * ten * ty
     out[5] = 2.0 * (coeff[YH + 1] + coeff[YH + 3]) * ten
     return out
+
+
+@njit(cache=True)
+def contact_block(coeff, nx, ny, ai, aj, k_normal, k_tangential):
+    """Resistance block of a contact: the dashpot (lubrication frozen at contact, in ``coeff``) plus,
+    for the linearly implicit integrator, the spring stiffness times dt (``k_normal``, ``k_tangential``
+    in F_CL / (a gamma0_dot); zero for explicit Euler).
+
+    The springs change over a step by dt * K (U_total): normal overlap by -n.(U_j - U_i), tangential
+    stretch by the sliding velocity g.U with g = [-t, -a_i, t, -a_j]; the generalised force on the
+    pair is -dt K g (g.U), i.e. a symmetric positive semi-definite block k g g^T.
+    """
+    R = pair_block(coeff, nx, ny)
+    tx = -ny
+    ty = nx
+    gn = np.array([-nx, -ny, 0.0, nx, ny, 0.0])
+    gt = np.array([-tx, -ty, -ai, tx, ty, -aj])
+    for r in range(6):
+        for q in range(6):
+            R[r, q] += k_normal * gn[r] * gn[q] + k_tangential * gt[r] * gt[q]
+    return R

@@ -6,7 +6,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-INTEGRATORS = ("euler", "heun")
+INTEGRATORS = ("euler", "implicit")
 
 
 class ParameterError(ValueError):
@@ -33,7 +33,7 @@ class SimParams:
     kn_coefficient: float = 2e4  # k_n = kn_coefficient * (sigma/sigma0) / (6 pi)  [F_CL / a]
     kt_ratio: float = 0.5  # k_t / k_n
     disp_max: float = 1e-3  # max displacement per step [a]
-    integrator: str = "euler"  # "euler" (LF_DEM) or "heun" (predictor-corrector)
+    integrator: str = "euler"  # "euler" (explicit, LF_DEM) or "implicit" (linearly implicit springs)
     dt_max: float = 1.0  # cap on dt when all velocities vanish [6 pi eta0 a^2 / F_CL]
     neighbour_skin: float = 0.4  # Verlet skin [a]; the matrix pattern lives as long as the list
     output_interval: float = 0.01  # strain between time-series rows

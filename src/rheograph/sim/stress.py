@@ -8,7 +8,7 @@ converts to sigma0 = F_CL / (6 pi a^2) (see ``stress_unit_factor``).  Tensors ar
 import numpy as np
 from numba import njit
 
-from rheograph.sim.lubrication import XG, XM, YG, YM, pair_block
+from rheograph.sim.lubrication import XG, XM, YG, YM, contact_block
 
 
 @njit(cache=True)
@@ -61,13 +61,16 @@ def _add_lubrication_stresslet(out, coeff, nx, ny, ui, uj, wi, wj, exx, exy, eyy
 
 @njit(cache=True)
 def pair_stress_sums(
-    vel, rate, radii, pair_i, pair_j, nvec, r, dy, coeff, lubricated, in_contact, full
+    vel, rate, radii, pair_i, pair_j, nvec, r, dy, coeff, lubricated, in_contact, k_normal, k_tangential,
+    full,
 ):
     """Sum of pair stresslets (xx, xy, yy) for non-affine velocities ``vel`` (3N) and shear rate ``rate``.
 
     Returns (lubrication (3,), dashpot (3,)).  The dashpot force on i, F_i = -[R_pair (v + affine)]_i with
     the affine relative motion at ``rate``, enters the contact virial r_ij (x) F_ij (r_ij from i to j,
-    F_ij the force on i), symmetrised.  Springs are handled by ``spring_stress``.
+    F_ij the force on i), symmetrised.  Springs at the start of the step are handled by
+    ``spring_stress``; their implicit change over the step (``k_normal``, ``k_tangential``) is part of the
+    contact block and so of this force.
     """
     lub = np.zeros(3)
     dash = np.zeros(3)
@@ -88,7 +91,7 @@ def pair_stress_sums(
                 lub, coeff[p], nx, ny, ui, uj, vel[3 * i + 2], vel[3 * j + 2], 0.0, 0.5 * rate, 0.0, full
             )
         elif in_contact[p]:
-            R = pair_block(coeff[p], nx, ny)
+            R = contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p])
             for q in range(3):
                 vp[q] = vel[3 * i + q]
                 vp[3 + q] = vel[3 * j + q]
