@@ -1,0 +1,131 @@
+"""Run time against error: eta_r, Pi, Z_mu and cost vs disp_max for the explicit (LF_DEM) and the
+linearly implicit integrators at phi = 0.76, N = 400.
+
+    python bench/time_step_convergence.py run  [--stress 10 200] [--disp 4e-3 2e-3 1e-3 5e-4] [--seeds 1]
+    python bench/time_step_convergence.py plot  # docs/figures/time_step_convergence.png + markdown table
+
+Runs are resumable (one trajectory file per point under data/time_step/); cost is the wall time per unit
+strain recorded by the runner on this machine (single thread).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from rheograph.cli import sim_id  # noqa: E402
+from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
+from rheograph.runner import run_state_point  # noqa: E402
+from rheograph.sim.params import SimParams  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "data" / "time_step"
+
+
+def run(args) -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    for seed in args.seeds:
+        for stress in args.stress:
+            for integrator in args.integrators:
+                for disp in args.disp:
+                    params = SimParams(
+                        n_particles=args.n, phi=args.phi, stress=stress, seed=seed, strain=args.strain,
+                        disp_max=disp, integrator=integrator, snapshot_interval=args.strain,
+                        steady_state_strain=args.steady,
+                    )
+                    path = OUT / (sim_id(args.n, args.phi, stress, seed, disp, integrator) + ".h5")
+                    outcome = run_state_point(params, path, progress=False)
+                    cost_file = path.with_suffix(".cost.json")
+                    if outcome.steps and outcome.wall_seconds > 1.0:
+                        prior = json.loads(cost_file.read_text()) if cost_file.exists() else {"wall": 0.0}
+                        prior["wall"] += outcome.wall_seconds
+                        prior["strain"] = outcome.strain
+                        prior["steps"] = outcome.steps
+                        cost_file.write_text(json.dumps(prior))
+                    print(path.name, outcome.status, {k: round(v, 4) for k, v in outcome.summary.items()},
+                          flush=True)
+
+
+def collect() -> list[dict]:
+    rows = []
+    for path in sorted(OUT.glob("*.h5")):
+        info = read_run_info(path)
+        p = info["params"]
+        cost = json.loads(path.with_suffix(".cost.json").read_text())
+        ts = read_timeseries(path)
+        rows.append(dict(
+            stress=p["stress"], disp_max=p["disp_max"], integrator=p["integrator"], seed=p["seed"],
+            s_per_strain=cost["wall"] / cost["strain"], steps_per_strain=cost["steps"] / cost["strain"],
+            max_overlap=float(ts["max_overlap"].max()), **info["summary"],
+        ))
+    return rows
+
+
+def plot(args) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = collect()
+    stresses = sorted({r["stress"] for r in rows})
+    fig, axes = plt.subplots(len(stresses), 3, figsize=(13, 3.6 * len(stresses)), squeeze=False)
+    lines = ["| σ/σ0 | integrator | disp_max | η_r (± s.e.) | Π/σ | Z_μ | steps/strain | wall s/strain |",
+             "|---|---|---|---|---|---|---|---|"]
+    for row_axes, stress in zip(axes, stresses):
+        for integrator, marker in (("euler", "o"), ("implicit", "s")):
+            sel = sorted((r for r in rows if r["stress"] == stress and r["integrator"] == integrator),
+                         key=lambda r: -r["disp_max"])
+            if not sel:
+                continue
+            cost = np.array([r["s_per_strain"] for r in sel])
+            for ax, key, scale in zip(row_axes, ("viscosity", "pressure", "z_mu"), (1.0, 1.0 / stress, 1.0)):
+                y = np.array([r[key] for r in sel]) * scale
+                err = np.array([r[key + "_se"] for r in sel]) * scale
+                ax.errorbar(cost, y, yerr=err, marker=marker, capsize=3, label=integrator)
+                for c, yy, r in zip(cost, y, sel):
+                    ax.annotate(f"{r['disp_max']:g}", (c, yy), textcoords="offset points", xytext=(4, 4),
+                                fontsize=7)
+            for r in sel:
+                lines.append(
+                    f"| {stress:g} | {integrator} | {r['disp_max']:g} | {r['viscosity']:.1f} ± "
+                    f"{r['viscosity_se']:.1f} | {r['pressure'] / stress:.3f} | {r['z_mu']:.2f} | "
+                    f"{r['steps_per_strain']:.0f} | {r['s_per_strain']:.1f} |"
+                )
+        for ax, label in zip(row_axes, ("η_r", "Π/σ", "Z_μ")):
+            ax.set_xscale("log")
+            ax.set_xlabel("wall seconds per unit strain (N = 400, 1 thread)")
+            ax.set_ylabel(label)
+            ax.set_title(f"φ = {args.phi}, σ/σ0 = {stress:g}")
+            ax.legend(fontsize=8)
+    fig.tight_layout()
+    out = ROOT / "docs" / "figures" / "time_step_convergence.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    print("\n".join(lines))
+    print(f"wrote {out}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("mode", choices=("run", "plot"))
+    ap.add_argument("--stress", type=float, nargs="+", default=[10.0, 200.0])
+    ap.add_argument("--disp", type=float, nargs="+", default=[4e-3, 2e-3, 1e-3, 5e-4])
+    ap.add_argument("--integrators", nargs="+", default=["euler", "implicit"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1])
+    ap.add_argument("--phi", type=float, default=0.76)
+    ap.add_argument("--n", type=int, default=400)
+    ap.add_argument("--strain", type=float, default=3.0)
+    ap.add_argument("--steady", type=float, default=0.5)
+    args = ap.parse_args()
+    run(args) if args.mode == "run" else plot(args)
+
+
+if __name__ == "__main__":
+    main()

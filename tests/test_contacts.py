@@ -1,0 +1,90 @@
+"""Critical Load Model: frictionless / stick / slide / reset transitions and spring forces."""
+
+import numpy as np
+import pytest
+
+from rheograph.sim import contacts
+from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK
+
+KN, KT, MU = 1000.0, 500.0, 0.5
+RADII = np.array([1.0, 1.4])
+PI, PJ = np.array([0]), np.array([1])
+ABAR = 1.2
+NVEC = np.array([[1.0, 0.0]])
+
+
+def clm(overlap, stretch_t, stretch_n=0.0):
+    xi = np.array([-overlap / ABAR])
+    stretch = np.array([[stretch_n, stretch_t]])
+    state = np.zeros(1, dtype=np.int8)
+    nf = contacts.critical_load_update(RADII, PI, PJ, NVEC, xi, stretch, state, KN, KT, MU, 1.0)
+    return nf, state[0], stretch[0]
+
+
+def test_below_critical_load_is_frictionless_and_resets_memory():
+    overlap = 0.5 / (KN * ABAR)  # F_n = 0.5 F_CL
+    nf, state, stretch = clm(overlap, 1e-3)
+    assert (nf, state) == (0, FRICTIONLESS)
+    np.testing.assert_array_equal(stretch, 0.0)
+
+
+def test_above_critical_load_sticks_within_the_coulomb_bound():
+    overlap = 3.0 / (KN * ABAR)  # F_n = 3 F_CL: capacity mu (3 - 1) = 1
+    small = 0.5 / (KT * ABAR)  # |F_t| = 0.5 < 1
+    nf, state, stretch = clm(overlap, small, stretch_n=0.2)
+    assert (nf, state) == (1, STICK)
+    np.testing.assert_allclose(stretch, [0.0, small])  # projected onto the tangent, magnitude kept
+
+
+def test_beyond_the_bound_slides_and_is_rescaled_onto_it():
+    overlap = 3.0 / (KN * ABAR)
+    big = 4.0 / (KT * ABAR)
+    nf, state, stretch = clm(overlap, -big)
+    assert (nf, state) == (1, SLIDE)
+    assert KT * ABAR * np.abs(stretch[1]) == pytest.approx(MU * (3.0 - 1.0))
+    assert stretch[1] < 0  # direction kept
+
+
+def test_separation_clears_the_contact():
+    xi = np.array([0.01])
+    stretch = np.array([[0.0, 1e-3]])
+    state = np.array([STICK], dtype=np.int8)
+    contacts.critical_load_update(RADII, PI, PJ, NVEC, xi, stretch, state, KN, KT, MU, 1.0)
+    assert state[0] == NONE and np.all(stretch == 0)
+
+
+def test_frictionless_when_mu_is_zero():
+    overlap = 3.0 / (KN * ABAR)
+    xi = np.array([-overlap / ABAR])
+    stretch = np.array([[0.0, 1e-4]])
+    state = np.zeros(1, dtype=np.int8)
+    nf = contacts.critical_load_update(RADII, PI, PJ, NVEC, xi, stretch, state, KN, KT, 0.0, 1.0)
+    assert nf == 0 and state[0] == FRICTIONLESS
+
+
+def test_spring_forces_obey_newton_and_torque_convention():
+    overlap = 0.01
+    xi = np.array([-overlap / ABAR])
+    stretch = np.array([[0.0, 2e-3]])
+    state = np.array([STICK], dtype=np.int8)
+    out = np.zeros(6)
+    f_on_i = contacts.contact_spring_forces(RADII, PI, PJ, NVEC, xi, stretch, state, KN, KT, out)
+    fn = KN * ABAR * overlap
+    ft = KT * ABAR * 2e-3
+    np.testing.assert_allclose(f_on_i[0], [-fn, ft])
+    np.testing.assert_allclose(out[[0, 1]], -out[[3, 4]])  # action = reaction
+    # torques a_i n x F_t and a_j n x F_t, same sign
+    np.testing.assert_allclose(out[[2, 5]], [RADII[0] * ft, RADII[1] * ft])
+
+
+def test_stretch_increment_uses_total_relative_surface_velocity():
+    """Pure affine shear of a pair aligned with y slides the contact by -(shear_rate * dy) ... checked
+    against the formula (U_j - U_i + shear * dy e_x).t - (a_i w_i + a_j w_j)."""
+    nvec = np.array([[0.0, 1.0]])  # j above i: t = (-1, 0)
+    dy = np.array([2.4])
+    vel = np.zeros(6)  # no non-affine motion
+    shear = 0.5
+    sx, sy = contacts.sliding_velocity(vel, RADII, PI, PJ, nvec, dy, shear, 0)
+    # affine: relative translation shear*dy along x, both rotate at -shear/2
+    vt = (shear * 2.4) * -1.0 - (RADII[0] * -0.25 + RADII[1] * -0.25)
+    np.testing.assert_allclose([sx, sy], [vt * -1.0, 0.0])

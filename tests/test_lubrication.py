@@ -1,0 +1,146 @@
+"""Pair-level checks of the lubrication/dashpot resistance (validation ladder rung 1)."""
+
+import numpy as np
+import pytest
+
+from rheograph.sim.lubrication import (
+    N_COEFF,
+    XA,
+    contact_block,
+    pair_block,
+    pair_coefficients,
+    singular_factors,
+    strain_force,
+)
+from rheograph.sim.stress import _add_lubrication_stresslet
+
+RADII = [(1.0, 1.0), (1.0, 1.4), (1.4, 1.0), (1.4, 1.4)]
+
+
+def coefficients(ai, aj, xi, delta=1e-3):
+    c, ell = singular_factors(xi, delta)
+    out = np.zeros(N_COEFF)
+    pair_coefficients(ai, aj, c, ell, out)
+    return out, c, ell
+
+
+def unit(theta):
+    return np.cos(theta), np.sin(theta)
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+@pytest.mark.parametrize("xi", [1e-4, 0.01, 0.3, -0.01])
+def test_pair_block_is_symmetric_positive_semidefinite(ai, aj, xi):
+    coeff, _, _ = coefficients(ai, aj, xi)
+    nx, ny = unit(0.7)
+    R = pair_block(coeff, nx, ny)
+    np.testing.assert_allclose(R, R.T, rtol=0, atol=1e-12 * np.abs(R).max())
+    # with the one-body drag added, the pair system is positive definite
+    drag = np.diag([ai, ai, 4 * ai**3 / 3, aj, aj, 4 * aj**3 / 3])
+    assert np.linalg.eigvalsh(R + drag).min() > 0
+    # the leading-order lubrication block alone is positive semi-definite (up to round-off)
+    assert np.linalg.eigvalsh(R).min() > -1e-9 * np.abs(R).max()
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+def test_uniform_translation_gives_no_force(ai, aj):
+    coeff, _, _ = coefficients(ai, aj, 0.01)
+    R = pair_block(coeff, *unit(1.1))
+    for u in ([1.0, 0.0], [0.0, 1.0]):
+        v = np.array([u[0], u[1], 0.0, u[0], u[1], 0.0])
+        np.testing.assert_allclose(R @ v, 0.0, atol=1e-10 * np.abs(R).max())
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+@pytest.mark.parametrize("theta", [0.0, 0.9, 2.5])
+def test_rigid_rotation_of_a_touching_pair_gives_no_force_or_torque(ai, aj, theta):
+    """A pair at centre distance a_i + a_j rotating rigidly feels nothing (any rotation centre)."""
+    coeff, _, _ = coefficients(ai, aj, 0.0)
+    nx, ny = unit(theta)
+    r = ai + aj
+    xi_pos = np.array([0.3, -0.2])
+    xj_pos = xi_pos + r * np.array([nx, ny])
+    omega = 0.37
+
+    def rigid(x):
+        return omega * np.array([-x[1], x[0]])
+
+    v = np.concatenate([rigid(xi_pos), [omega], rigid(xj_pos), [omega]])
+    f = pair_block(coeff, nx, ny) @ v
+    np.testing.assert_allclose(f, 0.0, atol=1e-10 * np.abs(pair_block(coeff, nx, ny)).max())
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+def test_squeeze_closed_form(ai, aj):
+    """X^A_11 = 2 a_i^2 a_j^2 / (a_i + a_j)^3 * c, and for equal spheres F = (3/2) pi eta0 a^2 v / h."""
+    xi = 1e-3
+    coeff, c, _ = coefficients(ai, aj, xi, delta=1e-12)
+    assert coeff[XA] == pytest.approx(2 * ai**2 * aj**2 / (ai + aj) ** 3 * c, rel=1e-12)
+    if ai == aj:
+        h = xi * ai
+        v = 0.3  # j approaches i along -n
+        R = pair_block(coeff, 1.0, 0.0)
+        f_i = -(R @ np.array([0, 0, 0, -v, 0, 0]))[0]
+        # force on i pushes it away (-x); 6 pi eta0 units: (3/2) pi a^2 v / h / (6 pi) = a^2 v / (4 h)
+        assert f_i == pytest.approx(-(ai**2) * v / (4 * h), rel=1e-6)
+
+
+def test_equal_sphere_tangential_force_closed_form():
+    a = 1.0
+    coeff, _, ell = coefficients(a, a, 0.02)
+    nx, ny = unit(0.4)
+    t = np.array([-ny, nx])
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=6)
+    f = -(pair_block(coeff, nx, ny) @ v)
+    expected = (a * ell / 6) * ((v[3:5] - v[0:2]) @ t - a * (v[2] + v[5]))
+    assert f[0:2] @ t == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+def test_strain_force_is_the_resistance_to_affine_separation(ai, aj):
+    """In pure extension along n, R_FE:E balances the squeeze resistance to the affine motion at r = 2 a_bar."""
+    coeff, _, _ = coefficients(ai, aj, 0.01)
+    nx, ny = 1.0, 0.0
+    g = strain_force(coeff, nx, ny, 1.0, 0.0, -1.0)  # E = diag(1, -1): n.E.n = 1
+    assert g[0] > 0 and g[3] < 0  # the flow pulls the particles apart: lubrication holds them together
+    np.testing.assert_allclose(g[0], -g[3], rtol=1e-12)
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+def test_stresslet_reciprocity_translation(ai, aj):
+    """R_SU = R_FE^T: the stresslet produced by translation equals (minus) the force produced by strain."""
+    coeff, _, _ = coefficients(ai, aj, 0.02)
+    nx, ny = unit(0.8)
+    e = np.array([0.0, 0.5, 0.0])  # simple shear, unit rate
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        u = rng.normal(size=6)
+        u[2] = u[5] = 0.0  # translation only
+        s = np.zeros(3)
+        _add_lubrication_stresslet(s, coeff, nx, ny, u[0:2], u[3:5], 0.0, 0.0, 0.0, 0.0, 0.0, True)
+        s_dot_e = s[1]  # S : E_hat = S_xy for E_xy = E_yx = 1/2
+        g = strain_force(coeff, nx, ny, *e)
+        assert s_dot_e == pytest.approx(-(g @ u), rel=1e-10, abs=1e-12)
+
+
+def test_stresslet_reciprocity_rotation_equal_spheres():
+    """For equal spheres LF_DEM's Y^M rotation term equals Jeffrey-Onishi's Y^H one: full reciprocity."""
+    coeff, _, _ = coefficients(1.0, 1.0, 0.02)
+    nx, ny = unit(0.8)
+    s = np.zeros(3)
+    w = 0.6
+    _add_lubrication_stresslet(s, coeff, nx, ny, np.zeros(2), np.zeros(2), w, w, 0.0, 0.0, 0.0, True)
+    g = strain_force(coeff, nx, ny, 0.0, 0.5, 0.0)
+    assert s[1] == pytest.approx(-(g[2] + g[5]) * w, rel=1e-10)
+
+
+def test_contact_block_adds_positive_stiffness():
+    coeff, _, _ = coefficients(1.0, 1.4, -0.001)
+    nx, ny = unit(0.3)
+    base = pair_block(coeff, nx, ny)
+    stiff = contact_block(coeff, nx, ny, 1.0, 1.4, 5.0, 2.0)
+    diff = stiff - base
+    np.testing.assert_allclose(diff, diff.T, atol=1e-12)
+    eig = np.linalg.eigvalsh(diff)
+    assert eig.min() > -1e-12 and np.sum(eig > 1e-9) == 2  # one normal and one tangential mode
