@@ -47,15 +47,19 @@ def random_configuration(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Uniform random centres in the square box, overlaps removed by overdamped soft repulsion.
 
-    Relaxation runs with radii inflated by (1 + min_gap) (as LF_DEM's generator does), so that the
-    returned configuration starts with open gaps rather than a crowd of marginal contacts.
+    Relaxation runs with radii inflated by (1 + min_gap) (as LF_DEM's generator does; less above an
+    area fraction of 0.80), so that the configuration starts with open gaps rather than a crowd of
+    marginal contacts.
 
     Returns (positions (N, 2), radii (N,)).  Raises RuntimeError if the overlaps cannot be relaxed
     below ``tolerance`` (the area fraction is above random close packing).
     """
     rng = np.random.default_rng(seed)
     true_radii = bidisperse_radii(n_small, n_large, size_ratio)
-    radii = true_radii * (1.0 + min_gap)
+    # inflate, but never beyond an area fraction of 0.80, which soft spheres still relax quickly
+    phi = np.pi * np.sum(true_radii**2) / box_length**2
+    inflate = min(1.0 + min_gap, max(1.0, np.sqrt(0.80 / phi)))
+    radii = true_radii * inflate
     n = radii.shape[0]
     pos = (rng.random((n, 2)) - 0.5) * box_length
     lx = ly = float(box_length)

@@ -1,0 +1,168 @@
+"""Flow curves (eta_r, Pi, Z_mu vs sigma) from a directory of trajectory files, optionally against
+LF_DEM reference data.
+
+    python -m rheograph.flowcurve data/flow_curves --out docs --reference ../shared/reference/lfdem_phi0.76
+
+writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled:
+the value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the
+propagated block standard errors.  Shear-jammed runs are listed as such and never averaged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from collections import defaultdict
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rheograph.analysis import read_lfdem_data, steady_state_summary
+from rheograph.io.hdf5 import read_run_info
+
+KEYS = ("viscosity", "pressure", "z_mu", "z")
+
+
+def _is_trajectory(path: Path) -> bool:
+    try:
+        with h5py.File(path, "r") as h5:
+            return h5.attrs.get("producer") == "rheograph"
+    except OSError:
+        return False
+
+
+def collect(directories) -> list[dict]:
+    """One entry per state point (n, phi, stress, disp_max, integrator), seeds pooled."""
+    groups = defaultdict(list)
+    for directory in directories:
+        for path in sorted(Path(directory).rglob("*.h5")):
+            if not _is_trajectory(path):
+                continue
+            info = read_run_info(path)
+            p = info["params"]
+            key = (p["n_particles"], p["phi"], p["stress"], p["disp_max"], p["integrator"])
+            groups[key].append(info)
+    points = []
+    for (n, phi, stress, disp, integrator), infos in sorted(groups.items()):
+        point = dict(n_particles=n, phi=phi, stress=stress, disp_max=disp, integrator=integrator,
+                     n_seeds=len(infos), statuses=sorted({i["status"] for i in infos}),
+                     strain=float(np.mean([i["strain"] for i in infos])))
+        flowing = [i for i in infos if i["status"] == "completed" and np.isfinite(i["summary"].get("viscosity", np.nan))]
+        point["jammed"] = any(i["status"] == "jammed" for i in infos)
+        for k in KEYS:
+            vals = np.array([i["summary"][k] for i in flowing])
+            ses = np.array([i["summary"][k + "_se"] for i in flowing])
+            if vals.size == 0:
+                point[k] = point[k + "_se"] = float("nan")
+                continue
+            spread = vals.std(ddof=1) / np.sqrt(vals.size) if vals.size > 1 else 0.0
+            point[k] = float(vals.mean())
+            point[k + "_se"] = float(max(spread, np.sqrt((ses**2).sum()) / vals.size))
+        points.append(point)
+    return points
+
+
+def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
+    """LF_DEM data_N*_phi*_s*_disp*.dat files summarised with the same estimator as rheograph runs."""
+    out = []
+    for path in sorted(Path(directory).glob("data_*.dat")):
+        m = re.match(r"data_N(\d+)_phi([\d.]+)_s([\d.]+)_disp([\d.e-]+)\.dat", path.name)
+        if not m:
+            continue
+        d = read_lfdem_data(path)
+        stress = float(m.group(3))
+        s = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, strain_min)
+        out.append(dict(n_particles=int(m.group(1)), phi=float(m.group(2)), stress=stress,
+                        disp_max=float(m.group(4)), strain=float(d["strain"][-1]), **s))
+    return out
+
+
+def markdown_table(points, reference=()) -> str:
+    lines = [
+        "| N | φ | σ/σ0 | disp_max | integrator | seeds | strain | η_r | Π/σ | Π_2D/σ (=1.5Π/σ) | Z_μ | Z | status |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for p in points:
+        if p["jammed"] and not np.isfinite(p["viscosity"]):
+            vals = "shear-jammed | – | – | – | – "
+        else:
+            vals = (f"{p['viscosity']:.1f} ± {p['viscosity_se']:.1f} | {p['pressure'] / p['stress']:.3f} | "
+                    f"{1.5 * p['pressure'] / p['stress']:.3f} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
+                    f"{p['z']:.2f}")
+        lines.append(f"| {p['n_particles']} | {p['phi']:g} | {p['stress']:g} | {p['disp_max']:g} | "
+                     f"{p['integrator']} | {p['n_seeds']} | {p['strain']:.1f} | {vals} | "
+                     f"{','.join(p['statuses'])} |")
+    if reference:
+        lines += ["", "LF_DEM reference (same estimator, strain ≥ 1):", "",
+                  "| N | φ | σ/σ0 | disp_max | strain | η_r | Π/σ | Π_2D/σ | Z_μ | Z |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in reference:
+            lines.append(f"| {r['n_particles']} | {r['phi']:g} | {r['stress']:g} | {r['disp_max']:g} | "
+                         f"{r['strain']:.1f} | {r['viscosity']:.1f} ± {r['viscosity_se']:.1f} | "
+                         f"{r['pressure'] / r['stress']:.3f} | {1.5 * r['pressure'] / r['stress']:.3f} | "
+                         f"{r['z_mu']:.2f} | {r['z']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(points, reference, out_png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    series = defaultdict(list)
+    for p in points:
+        series[(p["phi"], p["disp_max"], p["integrator"])].append(p)
+    for (phi, disp, integrator), pts in sorted(series.items()):
+        pts = sorted(pts, key=lambda q: q["stress"])
+        s = np.array([q["stress"] for q in pts])
+        label = f"φ={phi:g} (disp_max {disp:g}, {integrator})"
+        for ax, key, scale in zip(axes, ("viscosity", "pressure", "z_mu"), (False, True, False)):
+            y = np.array([q[key] for q in pts])
+            e = np.array([q[key + "_se"] for q in pts])
+            ax.errorbar(s, y, yerr=e, marker="o", capsize=3, label=label)
+        jam = [q["stress"] for q in pts if q["jammed"]]
+        if jam:
+            axes[0].plot(jam, [axes[0].get_ylim()[1]] * len(jam), "kx", label=f"φ={phi:g} shear-jammed")
+    for r_disp in sorted({r["disp_max"] for r in reference}):
+        ref = sorted((r for r in reference if r["disp_max"] == r_disp), key=lambda q: q["stress"])
+        s = np.array([r["stress"] for r in ref])
+        for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
+            ax.errorbar(s, [r[key] for r in ref], yerr=[r[key + "_se"] for r in ref], fmt="^", mfc="none",
+                        capsize=2, label=f"LF_DEM φ={ref[0]['phi']:g} disp_max {r_disp:g}")
+    for ax, label, logy in zip(axes, ("η_r", "Π / σ0  (−tr σ / 3)", "Z_μ"), (True, True, False)):
+        ax.set_xscale("log")
+        if logy:
+            ax.set_yscale("log")
+        ax.set_xlabel("σ / σ0")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("directories", nargs="+", help="directories searched recursively for trajectory files")
+    ap.add_argument("--out", required=True, help="output directory for flow_curves.png / flow_curves.md")
+    ap.add_argument("--reference", help="directory of LF_DEM data_*.dat files to compare with")
+    args = ap.parse_args(argv)
+    points = collect(args.directories)
+    if not points:
+        raise SystemExit(f"no rheograph trajectory files under {args.directories}")
+    reference = reference_points(args.reference) if args.reference else []
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plot(points, reference, out / "flow_curves.png")
+    table = markdown_table(points, reference)
+    (out / "flow_curves.md").write_text(table)
+    print(table)
+    print(f"wrote {out / 'flow_curves.png'} and {out / 'flow_curves.md'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,154 @@
+"""Trajectory files, resume after interruption, jam detection, stability, bad input."""
+
+import h5py
+import numpy as np
+import pytest
+
+from rheograph.io.hdf5 import TrajectoryFileError, read_run_info, read_timeseries
+from rheograph.runner import run_state_point
+from rheograph.sim.params import ParameterError, SimParams
+
+TINY = dict(n_particles=64, phi=0.74, stress=5.0, strain=0.12, output_interval=0.01,
+            snapshot_interval=0.03, steady_state_strain=0.02, disp_max=2e-3)
+
+
+def test_file_layout_and_snapshot_targets(tmp_path):
+    path = tmp_path / "run.h5"
+    out = run_state_point(SimParams(**TINY), path, progress=False)
+    assert out.status == "completed"
+    with h5py.File(path) as h5:
+        assert h5.attrs["schema_version"] == 1 and h5.attrs["status"] == "completed"
+        ts = h5["timeseries"]
+        n = ts["time"].shape[0]
+        assert n == 12 and ts["stress"].shape == (n, 3)
+        np.testing.assert_allclose(ts["stress"][:, 1], 5.0, rtol=1e-9)  # stress control
+        total = ts["stress_lubrication"][()] + ts["stress_contact"][()] + ts["stress_solvent"][()]
+        np.testing.assert_allclose(total, ts["stress"][()], rtol=1e-12)
+        np.testing.assert_allclose(ts["viscosity"][()], 5.0 / ts["shear_rate"][()], rtol=1e-9)
+        sn = h5["snapshots"]
+        assert sn["positions"].shape == (4, 64, 2)
+        np.testing.assert_allclose(sn["strain"][()], [0.0, 0.03, 0.06, 0.09], atol=3e-3)
+        off = sn["contact_offset"][()]
+        assert off.shape == (5,) and off[-1] == sn["contact_pairs"].shape[0]
+        # the snapshot targets are the instantaneous values of the rows at the same strain
+        for k, s in enumerate(sn["strain"][()]):
+            row = np.argmin(np.abs(ts["strain"][()] - s))
+            if abs(ts["strain"][row] - s) < 1e-12:
+                assert sn["viscosity"][k] == pytest.approx(ts["viscosity"][row])
+        # Z_mu counts the frictional contacts of the stored contact list
+        for k in range(4):
+            states = sn["contact_state"][off[k] : off[k + 1]]
+            assert sn["z_mu"][k] == pytest.approx(2 * np.sum(states >= 2) / 64)
+    info = read_run_info(path)
+    assert np.isfinite(info["summary"]["viscosity"])
+
+
+def test_resume_reproduces_the_uninterrupted_trajectory(tmp_path):
+    params = SimParams(**TINY)
+    ref = tmp_path / "ref.h5"
+    run_state_point(params, ref, progress=False)
+    # interrupt twice at arbitrary points (between checkpoints: checkpoint interval forced tiny/huge)
+    cut = tmp_path / "cut.h5"
+    first = run_state_point(params, cut, progress=False, max_steps=37)
+    assert first.status == "interrupted"
+    second = run_state_point(params, cut, progress=False, max_steps=53)
+    assert second.status == "interrupted"
+    third = run_state_point(params, cut, progress=False)
+    assert third.status == "completed"
+    a, b = read_timeseries(ref), read_timeseries(cut)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    with h5py.File(ref) as h1, h5py.File(cut) as h2:
+        np.testing.assert_array_equal(h1["snapshots/positions"][()], h2["snapshots/positions"][()])
+        np.testing.assert_array_equal(h1["snapshots/contact_pairs"][()], h2["snapshots/contact_pairs"][()])
+
+
+def test_rows_after_the_last_checkpoint_are_recomputed_not_duplicated(tmp_path):
+    params = SimParams(**{**TINY, "checkpoint_wall_seconds": 1e9})  # only the final checkpoint
+    path = tmp_path / "run.h5"
+    run_state_point(params, path, progress=False, max_steps=60)
+    n_first = read_timeseries(path)["time"].shape[0]
+    run_state_point(params, path, progress=False)
+    ts = read_timeseries(path)
+    assert ts["time"].shape[0] == 12 and n_first < 12
+    assert np.all(np.diff(ts["strain"]) > 0)
+
+
+def test_extending_the_strain_continues_a_completed_run(tmp_path):
+    path = tmp_path / "run.h5"
+    run_state_point(SimParams(**TINY), path, progress=False)
+    out = run_state_point(SimParams(**{**TINY, "strain": 0.2}), path, progress=False)
+    assert out.status == "completed" and out.strain >= 0.2
+    assert read_timeseries(path)["strain"].shape[0] == 20
+
+
+def test_resume_refuses_another_state_point(tmp_path):
+    path = tmp_path / "run.h5"
+    run_state_point(SimParams(**TINY), path, progress=False, max_steps=10)
+    with pytest.raises(TrajectoryFileError, match="stress"):
+        run_state_point(SimParams(**{**TINY, "stress": 6.0}), path, progress=False)
+
+
+def test_resume_refuses_corrupt_and_foreign_files(tmp_path):
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not an hdf5 file at all")
+    with pytest.raises(TrajectoryFileError, match="not a readable HDF5"):
+        run_state_point(SimParams(**TINY), junk, progress=False)
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as h5:
+        h5["x"] = 1
+    with pytest.raises(TrajectoryFileError, match="not a rheograph trajectory"):
+        run_state_point(SimParams(**TINY), foreign, progress=False)
+
+
+@pytest.mark.parametrize(
+    "override,match",
+    [
+        (dict(phi=0.95), "sim.phi"),
+        (dict(phi=0.0), "sim.phi"),
+        (dict(stress=-1.0), "sim.stress"),
+        (dict(stress=float("nan")), "sim.stress"),
+        (dict(n_particles=10), "too small for the interaction cut-off"),
+        (dict(disp_max=0.0), "sim.disp_max"),
+        (dict(integrator="rk4"), "sim.integrator"),
+    ],
+)
+def test_bad_parameters_are_named(override, match):
+    with pytest.raises(ParameterError, match=match):
+        SimParams(**{**TINY, **override})
+
+
+def test_unknown_parameter_is_rejected():
+    with pytest.raises(ParameterError, match="unknown simulation parameter"):
+        SimParams.from_mapping({**TINY, "temperature": 1.0})
+
+
+@pytest.mark.parametrize("phi,stress", [(0.80, 200.0), (0.82, 1000.0)])
+def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, stress):
+    params = SimParams(n_particles=100, phi=phi, stress=stress, strain=0.05, output_interval=0.005,
+                       snapshot_interval=1.0, disp_max=2e-3, jam_intervals=10**6)
+    out = run_state_point(params, tmp_path / "dense.h5", progress=False, max_steps=4000)
+    ts = read_timeseries(tmp_path / "dense.h5")
+    assert out.status in ("completed", "interrupted")
+    for key in ("shear_rate", "viscosity", "pressure", "max_overlap"):
+        assert np.all(np.isfinite(ts[key])), key
+    # k_n scales with the stress, so overlaps stay a few percent of a at any stress
+    assert ts["max_overlap"].max() < 0.05
+
+
+def test_jam_detection_ends_a_stalled_run(tmp_path):
+    """A nearly rigid frictional packing above phi_J^mu at high stress stops flowing: the run ends
+    as 'jammed' with the jammed rows recorded (jam_viscosity lowered to keep the test short)."""
+    params = SimParams(n_particles=100, phi=0.84, stress=100.0, strain=2.0, jam_viscosity=2e3,
+                       jam_intervals=5, disp_max=2e-3, relax_tolerance=1e-3)
+    out = run_state_point(params, tmp_path / "jam.h5", progress=False, max_steps=60000)
+    ts = read_timeseries(tmp_path / "jam.h5")
+    assert out.status == "jammed", (out, ts["viscosity"][-10:])
+    assert ts["jammed"][-5:].all()
+    assert read_run_info(tmp_path / "jam.h5")["status"] == "jammed"
+
+
+def test_flowing_state_is_not_flagged_jammed(tmp_path):
+    out = run_state_point(SimParams(**TINY), tmp_path / "flow.h5", progress=False)
+    assert out.status == "completed"
+    assert not read_timeseries(tmp_path / "flow.h5")["jammed"].any()
