@@ -15,6 +15,8 @@ Integrators:
 from __future__ import annotations
 
 import math
+import time as wallclock
+from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
@@ -148,6 +150,7 @@ class Simulation:
         self.stress_factor = stress_unit_factor(state.lx, state.ly)
         self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
         self.max_displacement = 0.0
+        self.timings: dict[str, float] = defaultdict(float)  # wall seconds per phase, for benchmarks
         # dt assumed by the implicit spring terms; saved in checkpoints via SimState.dt_assumed
         if state.dt_assumed <= 0.0:
             state.dt_assumed = params.disp_max
@@ -209,8 +212,13 @@ class Simulation:
     def step(self, record: bool = False) -> StepResult:
         """Advance one explicit-Euler step; ``record`` adds the full stress tensors and the contact list."""
         s, p = self.state, self.params
+        clock = wallclock.perf_counter
+        timings = self.timings
+        t0 = clock()
         if self._list_is_stale():
             self._rebuild_neighbours()
+        t1 = clock()
+        timings["neighbours"] += t1 - t0
         radii = s.radii
         nvec, r, xi, dy = pair_geometry(s.positions, radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset)
         kn, kt = p.kn, p.kt
@@ -230,9 +238,15 @@ class Simulation:
         f_on_i = contacts.contact_spring_forces(
             radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, kn, kt, rhs_const
         )
+        t2 = clock()
+        timings["assembly"] += t2 - t1
         self.solver.factorize(data)
+        t3 = clock()
+        timings["factorisation"] += t3 - t2
         vel_const = self.solver.solve(rhs_const)
         vel_rate = self.solver.solve(rhs_rate)
+        t4 = clock()
+        timings["solve"] += t4 - t3
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
         lub0, dash0 = pair_stress_sums(
@@ -250,6 +264,8 @@ class Simulation:
         s1_xy = f * (lub1[1] + dash1[1]) + 1.0
         shear_rate = (p.stress - s0_xy) / s1_xy
         vel = vel_const + shear_rate * vel_rate
+        t5 = clock()
+        timings["stress"] += t5 - t4
 
         # adaptive step: no particle, pair separation, contact point or strain increment may move more
         # than disp_max (physics.md §3.4; LF_DEM also limits the normal approach speed of pairs)
@@ -296,6 +312,7 @@ class Simulation:
         s.time += dt
         s.strain += shear_rate * dt
         s.steps += 1
+        timings["update"] += clock() - t5
         return result
 
 

@@ -1,0 +1,103 @@
+"""Simulator speed: wall and CPU seconds per unit strain, per particle-step, with a per-phase breakdown,
+at phi = 0.76, sigma/sigma0 = 10 (the LF_DEM reference point) for several N and disp_max.
+
+    python bench/simulate_speed.py                      # N = 400, 1000, 2000; disp_max 2e-3, 1e-3
+    python bench/simulate_speed.py --n 400 --disp 2e-3  # a subset
+
+Each case is warmed up (past the frictionless start-up transient, numba compiled) and then timed over
+``--windows`` consecutive strain windows; medians are reported.  Results replace the marked section of
+docs/benchmarks.md.  Run it alone on the machine: timings of a shared machine are noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from rheograph.sim import SimParams, Simulation  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+PHASES = ("neighbours", "assembly", "factorisation", "solve", "stress", "update")
+# LF_DEM, same machine kind, single thread (shared/reference/README.md): CPU s per unit strain
+LFDEM_CPU_PER_STRAIN = {(400, 2e-3): "~100", (400, 1e-3): "~130–180", (2000, 2e-3): "~490"}
+
+
+def measure(n, disp, integrator, warmup, window, windows):
+    sim = Simulation(SimParams(n_particles=n, phi=0.76, stress=10.0, disp_max=disp, integrator=integrator))
+    while sim.state.strain < warmup:
+        sim.step()
+    results = []
+    for _ in range(windows):
+        sim.timings.clear()
+        steps0, strain0 = sim.state.steps, sim.state.strain
+        w0, c0 = time.perf_counter(), time.process_time()
+        while sim.state.strain < strain0 + window:
+            sim.step()
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        nsteps, dstrain = sim.state.steps - steps0, sim.state.strain - strain0
+        results.append(dict(
+            wall_per_strain=wall / dstrain, cpu_per_strain=cpu / dstrain, steps_per_strain=nsteps / dstrain,
+            us_per_particle_step=1e6 * wall / (nsteps * n), ms_per_step=1e3 * wall / nsteps,
+            **{f"frac_{k}": sim.timings[k] / wall for k in PHASES},
+        ))
+    return {k: float(np.median([r[k] for r in results])) for k in results[0]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, nargs="+", default=[400, 1000, 2000])
+    ap.add_argument("--disp", type=float, nargs="+", default=[2e-3, 1e-3])
+    ap.add_argument("--integrators", nargs="+", default=["euler", "implicit"])
+    ap.add_argument("--warmup", type=float, default=0.3, help="strain before timing")
+    ap.add_argument("--windows", type=int, default=3)
+    ap.add_argument("--particle-steps", type=float, default=3e6, help="work per timing window")
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args()
+    lines = [
+        f"Machine: {os.cpu_count()} cores, single-threaded simulator (OPENBLAS_NUM_THREADS=1); "
+        f"φ = 0.76, σ/σ0 = 10; medians of {args.windows} windows after {args.warmup} strain of warm-up.",
+        "",
+        "| N | disp_max | integrator | wall s/strain | CPU s/strain | LF_DEM CPU s/strain | steps/strain | "
+        "ms/step | µs/particle-step | neighbours | assembly | factorise | solve | stress | update |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for integrator in args.integrators:
+        for disp in args.disp:
+            for n in args.n:
+                # strain window holding about --particle-steps particle-steps (~15 steps per 1e-3 strain)
+                window = max(0.01, args.particle_steps / (n * 15.0 / disp * 1e-3) * 1e-3)
+                r = measure(n, disp, integrator, args.warmup, window, args.windows)
+                ref = LFDEM_CPU_PER_STRAIN.get((n, disp), "–") if integrator == "euler" else "–"
+                line = (f"| {n} | {disp:g} | {integrator} | {r['wall_per_strain']:.1f} | {r['cpu_per_strain']:.1f} | "
+                        f"{ref} | {r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
+                        f"{r['us_per_particle_step']:.2f} | "
+                        + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES) + " |")
+                print(line, flush=True)
+                lines.append(line)
+    lines += ["", "Command: `python bench/simulate_speed.py " + " ".join(
+        f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
+        for k, v in vars(args).items() if k != "no_write") + "`"]
+    if not args.no_write:
+        write_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
+
+
+def write_section(path: Path, name: str, body: str) -> None:
+    """Replace the text between <!-- name:start --> and <!-- name:end --> (appending it if absent)."""
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    text = path.read_text() if path.exists() else "# Benchmarks\n"
+    block = f"{start}\n{body}\n{end}"
+    if start in text:
+        text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
+    else:
+        text = text.rstrip() + "\n\n" + block + "\n"
+    path.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
