@@ -41,3 +41,18 @@ def simulate_main(cfg: DictConfig) -> dict:
         if key in outcome.summary:
             log.info("  steady %s = %.4g +- %.2g", key, outcome.summary[key], outcome.summary[key + "_se"])
     return {"status": outcome.status, "path": str(path), **outcome.summary}
+
+
+def train_main(cfg: DictConfig) -> float:
+    """Train every configured fold into the Hydra run directory; returns the mean best val/loss."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    from hydra.core.hydra_config import HydraConfig
+
+    from rheograph.learn.train import train_folds
+
+    run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
+    summary = train_folds(cfg, run_dir)
+    for key, value in sorted(summary.items()):
+        log.info("%s = %.4g", key, value)
+    log.info("report: %s", run_dir / "report.md")
+    return summary["val/loss"]

@@ -1,0 +1,1 @@
+"""Snapshot -> graph conversion and the PyG dataset of snapshot graphs."""

@@ -1,0 +1,1 @@
+"""Learning: K-fold data module, ResGCN model, Lightning module, training driver, reports, prediction."""

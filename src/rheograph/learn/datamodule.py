@@ -1,0 +1,125 @@
+"""K-fold LightningDataModule over snapshot graphs.
+
+Splits (``split``): ``random`` shuffles snapshots (the seed paper's choice; snapshots of one trajectory are
+correlated, so test scores are optimistic) or ``grouped`` keeps every run (trajectory file) inside one
+fold.  Fold k is the test set, fold (k + 1) mod K the validation set (early stopping, checkpointing),
+the rest the training set.  Target standardisation is fitted on the training part only.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import torch
+from torch_geometric.loader import DataLoader
+
+from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
+
+SPLITS = ("random", "grouped")
+
+
+def kfold_assignment(n_items: int, num_folds: int, seed: int, groups: np.ndarray | None = None) -> np.ndarray:
+    """Fold index (0..K-1) of every item; with ``groups`` all items of a group share a fold."""
+    rng = np.random.default_rng(seed)
+    if groups is None:
+        order = rng.permutation(n_items)
+        folds = np.empty(n_items, dtype=np.int64)
+        folds[order] = np.arange(n_items) % num_folds
+        return folds
+    unique = np.unique(groups)
+    if unique.size < num_folds:
+        raise ValueError(f"grouped split needs at least num_folds={num_folds} runs, got {unique.size}")
+    # greedy balancing: largest groups first into the currently smallest fold (ties broken by seed)
+    sizes = {g: int(np.sum(groups == g)) for g in unique}
+    order = sorted(rng.permutation(unique), key=lambda g: -sizes[g])
+    load = np.zeros(num_folds, dtype=np.int64)
+    fold_of = {}
+    for g in order:
+        f = int(np.argmin(load + rng.random(num_folds) * 1e-3))
+        fold_of[g] = f
+        load[f] += sizes[g]
+    return np.array([fold_of[g] for g in groups], dtype=np.int64)
+
+
+class SnapshotDataModule(L.LightningDataModule):
+    def __init__(
+        self,
+        files: list[str] | str,
+        cache_dir: str = "data/cache",
+        graph: GraphSettings | dict | None = None,
+        fold: int = 0,
+        num_folds: int = 5,
+        split: str = "random",
+        split_seed: int = 0,
+        batch_size: int = 16,
+        num_workers: int = 0,
+        phi: float | None = None,
+    ):
+        super().__init__()
+        if split not in SPLITS:
+            raise ValueError(f"data.split={split!r} is invalid: allowed {SPLITS}")
+        if not 2 <= num_folds <= 20:
+            raise ValueError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
+        if not 0 <= fold < num_folds:
+            raise ValueError(f"data.fold={fold} is invalid: allowed 0..{num_folds - 1}")
+        if batch_size < 1:
+            raise ValueError(f"data.batch_size={batch_size} is invalid: allowed >= 1")
+        self.files = expand_files(files)
+        self.graph = graph if isinstance(graph, GraphSettings) else GraphSettings(**(graph or {}))
+        self.cache_dir, self.fold, self.num_folds = cache_dir, fold, num_folds
+        self.split, self.split_seed, self.batch_size = split, split_seed, batch_size
+        self.num_workers, self.phi = num_workers, phi
+        self.dataset = None
+
+    def setup(self, stage=None):
+        if self.dataset is not None:
+            return
+        dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir)
+        index = np.arange(len(dataset))
+        if self.phi is not None:  # per-phi model out of a pooled file list
+            index = index[np.isclose(dataset.phi.numpy(), self.phi)]
+            if index.size == 0:
+                raise ValueError(f"data.phi={self.phi}: no snapshots at this area fraction")
+        groups = dataset.run_id.numpy()[index] if self.split == "grouped" else None
+        folds = kfold_assignment(index.size, self.num_folds, self.split_seed, groups)
+        self.dataset = dataset
+        self.test_idx = index[folds == self.fold]
+        self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
+        self.train_idx = index[(folds != self.fold) & (folds != (self.fold + 1) % self.num_folds)]
+        y = dataset.y[torch.as_tensor(self.train_idx)]
+        self.target_mean = y.mean(dim=0)
+        self.target_std = y.std(dim=0).clamp_min(1e-6)
+
+    def split_record(self) -> dict:
+        return {"split": self.split, "split_seed": self.split_seed, "fold": self.fold,
+                "num_folds": self.num_folds, "train": self.train_idx.tolist(), "val": self.val_idx.tolist(),
+                "test": self.test_idx.tolist(), "files": self.files, "cache": self.dataset.digest}
+
+    def save_split(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.split_record()))
+
+    def _loader(self, idx, shuffle):
+        return DataLoader(self.dataset[torch.as_tensor(idx)], batch_size=self.batch_size, shuffle=shuffle,
+                          num_workers=self.num_workers)
+
+    def train_dataloader(self):
+        return self._loader(self.train_idx, True)
+
+    def val_dataloader(self):
+        return self._loader(self.val_idx, False)
+
+    def test_dataloader(self):
+        return self._loader(self.test_idx, False)
+
+
+def expand_files(files) -> list[str]:
+    """Expand glob patterns (a string or a list) into a sorted list of existing files."""
+    patterns = [files] if isinstance(files, str) else list(files)
+    out = sorted({p for pattern in patterns for p in glob.glob(str(pattern), recursive=True)})
+    if not out:
+        raise FileNotFoundError(f"data.files={patterns} matches no trajectory file")
+    return out

@@ -1,0 +1,170 @@
+"""Training driver shared by ``train.py`` and the hyperparameter search: K folds, report, model bundles."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from rheograph.graphs.dataset import GraphSettings
+from rheograph.learn.module import TARGET_NAMES, physical_targets, regression_metrics
+
+log = logging.getLogger("rheograph.train")
+
+
+def ensure_dataset(cfg: DictConfig) -> None:
+    """Simulate the state points of ``cfg.simulate_missing`` whose files do not exist yet."""
+    spec = cfg.get("simulate_missing")
+    if not spec:
+        return
+    from hydra import compose
+
+    from rheograph.cli import sim_id
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    directory = Path(spec.directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    base = compose(config_name="simulate", overrides=[f"sim={spec.preset}"]).sim
+    for phi in spec.phi:
+        for stress in spec.stress:
+            for seed in spec.seeds:
+                values = {**OmegaConf.to_container(base), **OmegaConf.to_container(spec.overrides),
+                          "phi": float(phi), "stress": float(stress), "seed": int(seed)}
+                params = SimParams.from_mapping(values)
+                path = directory / (sim_id(params.n_particles, phi, stress, seed, params.disp_max,
+                                           params.integrator) + ".h5")
+                if path.exists():
+                    from rheograph.io.hdf5 import read_run_info
+
+                    if read_run_info(path)["status"] in ("completed", "jammed"):
+                        continue
+                log.info("simulating missing state point %s", path.name)
+                run_state_point(params, path, progress=False)
+
+
+def graph_settings(cfg: DictConfig) -> GraphSettings:
+    values = OmegaConf.to_container(cfg.graph, resolve=True)
+    values["edge_features"] = tuple(values["edge_features"])
+    return GraphSettings(**values)
+
+
+def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str) -> None:
+    """A checkpoint loadable with torch.load(weights_only=True): tensors and plain Python values only."""
+    hp = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(module.hparams).items()}
+    torch.save({
+        "format": "rheograph-surrogate-1",
+        "state_dict": module.state_dict(),
+        "hparams": hp,
+        "graph": {**settings.__dict__, "edge_features": list(settings.edge_features)},
+        "fold": fold,
+        "split": split,
+    }, path)
+
+
+def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
+    """Train the configured folds; write bundles, splits, predictions and the report into ``run_dir``.
+
+    Returns the mean (over folds) of every test metric plus ``val/loss`` (the mean best validation loss),
+    the objective of the hyperparameter search.  ``trial`` (optuna) gets per-fold intermediate values.
+    """
+    import lightning as L
+
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    torch.set_num_threads(max(1, min(2, os.cpu_count() or 1)))
+    ensure_dataset(cfg)
+    settings = graph_settings(cfg)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    num_folds = int(cfg.data.num_folds)
+    folds = range(num_folds) if cfg.get("fold") is None else [int(cfg.fold)]
+    fold_results, predictions = [], []
+    for k in folds:
+        L.seed_everything(int(cfg.seed) + k, workers=True)
+        dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
+        dm.setup()
+        dm.save_split(run_dir / f"fold{k}_split.json")
+        module = instantiate(cfg.model, edge_in=len(settings.edge_features),
+                             viscosity_scale=settings.viscosity_scale, pressure_scale=settings.pressure_scale,
+                             _convert_="all")
+        module.set_target_scaling(dm.target_mean, dm.target_std)
+        callbacks = [instantiate(c) for c in cfg.callbacks.values()]
+        logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
+        trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=logger,
+                              default_root_dir=str(run_dir / f"fold{k}"))
+        trainer.fit(module, datamodule=dm)
+        ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
+        if ckpt is not None and ckpt.best_model_path:
+            state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
+            module.load_state_dict(state)
+        best_val = float(ckpt.best_model_score) if ckpt is not None and ckpt.best_model_score is not None \
+            else float(trainer.callback_metrics.get("val/loss", np.nan))
+        if not np.isfinite(best_val):
+            raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
+        test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
+        pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
+        predictions.append(dict(fold=k, pred=pred, true=true, **meta))
+        save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split)
+        result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
+        fold_results.append(result)
+        if logger:
+            logger.log_hyperparams(_flat_hparams(cfg), {"hp/" + key.replace("/", "_"): v
+                                                         for key, v in result.items() if key != "fold"})
+        if trial is not None:
+            trial.report(float(np.mean([r["val/loss"] for r in fold_results])), step=len(fold_results))
+            if trial.should_prune():
+                import optuna
+
+                raise optuna.TrialPruned(f"pruned after fold {k}")
+    np.savez(run_dir / "test_predictions.npz", **_stack_predictions(predictions))
+    summary = {key: float(np.mean([r[key] for r in fold_results])) for key in fold_results[0] if key != "fold"}
+    (run_dir / "metrics.json").write_text(json.dumps({"folds": fold_results, "mean": summary,
+                                                      "split": cfg.data.split}, indent=1))
+    if cfg.get("report", True):
+        from rheograph.learn.report import write_report
+
+        write_report(run_dir, fold_results, predictions, split=cfg.data.split)
+    return summary
+
+
+@torch.no_grad()
+def predict_dataset(module, dataset, batch_size: int = 64):
+    """Physical predictions and truths (G, 3) and per-graph metadata for a dataset of graphs."""
+    from torch_geometric.loader import DataLoader
+
+    module.eval()
+    preds, trues, stress, phi, run = [], [], [], [], []
+    for batch in DataLoader(dataset, batch_size=batch_size):
+        preds.append(module(batch).numpy())
+        trues.append(batch.y_raw.numpy())
+        stress.append(batch.stress.numpy())
+        phi.append(batch.phi.numpy())
+        run.append(batch.run_id.numpy())
+    hp = module.hparams
+    pred = physical_targets(np.concatenate(preds), hp.viscosity_scale, hp.pressure_scale)
+    return pred, np.concatenate(trues), {"stress": np.concatenate(stress), "phi": np.concatenate(phi),
+                                         "run_id": np.concatenate(run)}
+
+
+def _stack_predictions(predictions) -> dict:
+    out = {}
+    for key in ("pred", "true", "stress", "phi", "run_id"):
+        out[key] = np.concatenate([p[key] for p in predictions])
+    out["fold"] = np.concatenate([np.full(p["pred"].shape[0], p["fold"]) for p in predictions])
+    out["targets"] = np.array(TARGET_NAMES)
+    return out
+
+
+def _flat_hparams(cfg: DictConfig) -> dict:
+    flat = {}
+    for group in ("model", "graph", "data"):
+        for key, value in OmegaConf.to_container(cfg[group], resolve=True).items():
+            if key.startswith("_"):
+                continue
+            flat[f"{group}.{key}"] = value if isinstance(value, int | float | str | bool) else str(value)
+    return flat

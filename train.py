@@ -1,0 +1,16 @@
+"""Train the multitask ResGCN surrogate on simulated snapshots (all K folds, or fold=k) and write a report.
+See README.md and conf/train.yaml."""
+
+import hydra
+from omegaconf import DictConfig
+
+from rheograph.cli import train_main
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="train")
+def main(cfg: DictConfig) -> float:
+    return train_main(cfg)
+
+
+if __name__ == "__main__":
+    main()
