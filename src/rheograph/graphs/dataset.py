@@ -31,8 +31,8 @@ class GraphSettings:
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = EDGE_FEATURES
     min_strain: float = 1.0  # snapshots before this strain (start-up transient) are skipped
-    viscosity_scale: float = 0.01  # asinh scale of eta_r (log-like above a few times the scale)
-    pressure_scale: float = 0.01  # asinh scale of Pi [sigma0]
+    viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
+    pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -78,8 +78,9 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
             edge_attr=torch.from_numpy(edge_attr).float(),
             y=torch.from_numpy(y).float().view(1, 3),
             y_raw=torch.from_numpy(raw[idx]).double().view(1, 3),
-            phi=torch.tensor([params["phi"]]), stress=torch.tensor([params["stress"]]),
-            strain=torch.tensor([strain[idx]]), run_id=torch.tensor([run_id]),
+            phi=torch.tensor([params["phi"]], dtype=torch.float64),
+            stress=torch.tensor([params["stress"]], dtype=torch.float64),
+            strain=torch.tensor([strain[idx]], dtype=torch.float64), run_id=torch.tensor([run_id]),
         ))
     return graphs
 

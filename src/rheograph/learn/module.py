@@ -44,7 +44,7 @@ class SurrogateModule(L.LightningModule):
     def __init__(self, node_in: int = 2, edge_in: int = 6, hidden: int = 64, num_layers: int = 2,
                  aggr: str = "softmax", block: str = "res+", dropout: float = 0.1, pool: str = "mean",
                  lr: float = 5e-3, weight_decay: float = 0.0, loss_weights=(1.0, 1.0, 1.0),
-                 huber_beta: float = 1.0, viscosity_scale: float = 0.01, pressure_scale: float = 0.01):
+                 huber_beta: float = 1.0, viscosity_scale: float = 1.0, pressure_scale: float = 0.1):
         super().__init__()
         self.save_hyperparameters()
         if lr <= 0:

@@ -1,0 +1,6 @@
+"""Ensemble prediction of eta_r, Pi, Z_mu for every snapshot of a trajectory file (see --help)."""
+
+from rheograph.learn.predict import main
+
+if __name__ == "__main__":
+    main()
