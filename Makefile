@@ -18,10 +18,11 @@ $(VENV)/.installed: pyproject.toml
 	$(PY) -m pip install -e ".[dev]"
 	touch $@
 
-# main job on the small embedded default: simulate a tiny stress grid, then report its flow curve
+# main job on the small embedded default: simulate a tiny dataset (sim=tiny, 5 stresses; skipped when
+# present), train the 5-fold surrogate, write its report; then the dataset's flow curve
 demo: install
-	$(PY) simulate.py -m sim=tiny sim.stress=0.5,5,50 output_root=outputs/demo progress=false
-	$(PY) -m rheograph.flowcurve outputs/demo/multirun --out outputs/demo/report
+	$(PY) train.py debug=tiny output_root=outputs/demo
+	$(PY) -m rheograph.flowcurve data/tiny --out outputs/demo/flow_curve
 
 test: install
 	$(PY) -m pytest -q

@@ -50,6 +50,9 @@ def train_main(cfg: DictConfig) -> float:
 
     from rheograph.learn.train import train_folds
 
+    # Lightning's per-fold banners (GPU/TPU availability, advertising tips) drown the useful log lines
+    logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
+
     run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
     summary = train_folds(cfg, run_dir)
     for key, value in sorted(summary.items()):
