@@ -2,3 +2,28 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def tiny_files(tmp_path_factory):
+    """Three tiny simulated state points (N = 64, phi = 0.72, sigma = 0.5, 5, 50), ~10 snapshots each."""
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    directory = tmp_path_factory.mktemp("tiny")
+    files = []
+    for stress in (0.5, 5.0, 50.0):
+        params = SimParams(n_particles=64, phi=0.72, stress=stress, strain=0.3, snapshot_interval=0.025,
+                           steady_state_strain=0.05, disp_max=2e-3, integrator="implicit")
+        path = directory / f"s{stress:g}.h5"
+        run_state_point(params, path, progress=False)
+        files.append(str(path))
+    return files
+
+

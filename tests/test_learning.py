@@ -15,24 +15,9 @@ from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset, snapsh
 from rheograph.graphs.features import forward_transform, inverse_transform, snapshot_edges
 from rheograph.learn.datamodule import SnapshotDataModule, kfold_assignment
 from rheograph.learn.model import ResGCN
-from rheograph.runner import run_state_point
 from rheograph.sim.geometry import minimum_image
-from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="session")
-def tiny_files(tmp_path_factory):
-    directory = tmp_path_factory.mktemp("tiny")
-    files = []
-    for stress in (0.5, 5.0, 50.0):
-        params = SimParams(n_particles=64, phi=0.72, stress=stress, strain=0.3, snapshot_interval=0.025,
-                           steady_state_strain=0.05, disp_max=2e-3, integrator="implicit")
-        path = directory / f"s{stress:g}.h5"
-        run_state_point(params, path, progress=False)
-        files.append(str(path))
-    return files
 
 
 SETTINGS = GraphSettings(cutoff=0.5, min_strain=0.05)

@@ -59,3 +59,16 @@ def train_main(cfg: DictConfig) -> float:
         log.info("%s = %.4g", key, value)
     log.info("report: %s", run_dir / "report.md")
     return summary["val/loss"]
+
+
+def tune_main(cfg: DictConfig) -> None:
+    """Run (or resume) the Optuna study of ``cfg.tune``; trials are written under the run directory."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    from hydra.core.hydra_config import HydraConfig
+
+    from rheograph.learn.tune import run_study
+
+    logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
+    run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    run_study(cfg, run_dir)

@@ -1,0 +1,105 @@
+"""Hyperparameter search: a small driver over Optuna (>= 4) and ``hydra.compose``.
+
+Each trial composes ``conf/train.yaml`` with the fixed ``train_overrides`` and the sampled values, then
+calls :func:`rheograph.learn.train.train_folds` (the function behind ``train.py``).  The objective is the
+mean over folds of the best validation loss; it is reported after every fold so that the MedianPruner can
+stop hopeless trials early.  A trial that raises (diverged loss, bad sample, ...) is recorded as FAIL and
+the study goes on.  The study lives in an RDB storage (SQLite by default), so a second invocation resumes
+it and several workers can share one.  The best trial is written as a ready-to-use experiment config.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import optuna
+from hydra import compose
+from omegaconf import DictConfig, OmegaConf
+
+from rheograph.learn.train import train_folds
+
+log = logging.getLogger("rheograph.tune")
+
+
+def suggest(trial: optuna.Trial, name: str, spec: dict):
+    kind = spec["type"]
+    if kind == "categorical":
+        # Optuna stores only scalar choices: list-valued choices (e.g. loss weights) go by their string
+        labels = {str(c): c for c in spec["choices"]}
+        return labels[trial.suggest_categorical(name, list(labels))]
+    if kind == "int":
+        return trial.suggest_int(name, spec["low"], spec["high"], step=spec.get("step", 1), log=spec.get("log", False))
+    if kind == "float":
+        return trial.suggest_float(name, spec["low"], spec["high"], step=spec.get("step"), log=spec.get("log", False))
+    raise ValueError(f"search space entry {name}: unknown type {kind!r} (categorical, int, float)")
+
+
+def _override(name: str, value) -> str:
+    if isinstance(value, list):
+        return f"{name}=[{','.join(str(v) for v in value)}]"
+    if isinstance(value, str):
+        return f"{name}='{value}'"
+    return f"{name}={value}"
+
+
+def make_objective(cfg: DictConfig, run_root: Path):
+    space = OmegaConf.to_container(cfg.tune.search_space, resolve=True)
+    base = list(cfg.train_overrides)
+
+    def objective(trial: optuna.Trial) -> float:
+        overrides = [_override(name, suggest(trial, name, spec)) for name, spec in space.items()]
+        trial.set_user_attr("overrides", overrides)
+        train_cfg = compose(config_name="train", overrides=base + overrides)
+        summary = train_folds(train_cfg, run_root / f"trial_{trial.number:04d}", trial=trial)
+        for key, value in summary.items():
+            trial.set_user_attr(key, value)
+        return summary["val/loss"]
+
+    return objective
+
+
+def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
+    t = cfg.tune
+    study = optuna.create_study(
+        study_name=t.study_name, storage=t.storage, load_if_exists=True, direction=t.direction,
+        sampler=optuna.samplers.TPESampler(seed=t.sampler_seed),
+        pruner=optuna.pruners.MedianPruner(n_startup_trials=t.pruner.n_startup_trials,
+                                           n_warmup_steps=t.pruner.n_warmup_steps),
+    )
+    done = sum(s.state.is_finished() for s in study.trials)
+    remaining = max(0, int(t.n_trials) - done)
+    log.info("study %s in %s: %d trials finished, %d to run", t.study_name, t.storage, done, remaining)
+    study.optimize(objective or make_objective(cfg, run_root), n_trials=remaining, catch=(Exception,),
+                   gc_after_trial=True)
+    states = {s: sum(tr.state == s for tr in study.trials) for s in optuna.trial.TrialState}
+    log.info("trials: %s", {s.name: n for s, n in states.items() if n})
+    if any(tr.state == optuna.trial.TrialState.COMPLETE for tr in study.trials):
+        space = OmegaConf.to_container(t.search_space, resolve=True)
+        path = write_best_experiment(study, Path(t.best_experiment_dir), list(cfg.train_overrides), space)
+        log.info("best trial %d: val/loss = %.4g -> %s", study.best_trial.number, study.best_value, path)
+    return study
+
+
+def write_best_experiment(study: optuna.Study, directory: Path, base_overrides: list[str], space: dict) -> Path:
+    """``conf/experiment/<study>_best.yaml``: use with ``python train.py experiment=<study>_best``."""
+    directory.mkdir(parents=True, exist_ok=True)
+    best = study.best_trial
+    lines = ["# @package _global_",
+             f"# best trial {best.number} of Optuna study '{study.study_name}': mean best val/loss "
+             f"{best.value:.6g}",
+             f"# fixed overrides of the study: {base_overrides}"]
+    nested: dict = {}
+    for name, value in best.params.items():
+        node = nested
+        *parents, leaf = name.split(".")
+        for p in parents:
+            node = node.setdefault(p, {})
+        spec = space[name]
+        if spec["type"] == "categorical":  # stored by the choice's string (see ``suggest``)
+            value = {str(c): c for c in spec["choices"]}[value]
+        node[leaf] = value
+    text = "\n".join(lines) + "\n" + OmegaConf.to_yaml(OmegaConf.create(nested))
+    path = directory / f"{study.study_name}_best.yaml"
+    path.write_text(text)
+    return path

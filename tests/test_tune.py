@@ -1,0 +1,59 @@
+"""Optuna driver: a failing trial does not stop the study, pruning is exercised, best config written,
+and a second invocation resumes the same study."""
+
+from pathlib import Path
+
+import optuna
+import pytest
+from hydra import compose, initialize_config_dir
+
+from rheograph.learn.tune import make_objective, run_study
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.slow
+def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
+    pattern = str(Path(tiny_files[0]).parent / "*.h5")
+    train_overrides = [
+        f"data.files={pattern}", f"data.cache_dir={tmp_path / 'cache'}", "data.num_folds=3",
+        "graph.min_strain=0.05", "trainer.max_epochs=4", "~logger", "report=false",
+        "trainer.enable_progress_bar=false",
+    ]
+    overrides = [
+        f"output_root={tmp_path}", f"tune.storage=sqlite:///{tmp_path}/study.db",
+        f"tune.best_experiment_dir={tmp_path}/experiment", "tune.n_trials=3", "tune.pruner.n_startup_trials=1",
+        "train_overrides=[" + ",".join(f"'{o}'" for o in train_overrides) + "]",
+    ]
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="tune", overrides=overrides)
+        objective = make_objective(cfg, tmp_path / "trials")
+
+        def sometimes_failing(trial):
+            if trial.number == 1:
+                raise FloatingPointError("forced failure (e.g. NaN loss)")
+            return objective(trial)
+
+        study = run_study(cfg, tmp_path / "trials", objective=sometimes_failing)
+        states = [t.state for t in study.trials]
+        assert len(states) == 3
+        assert states.count(optuna.trial.TrialState.FAIL) == 1
+        finished = [t for t in study.trials if t.state != optuna.trial.TrialState.FAIL]
+        # per-fold intermediate values are reported: the pruner sees every fold of every trial
+        assert all(len(t.intermediate_values) >= 1 for t in finished)
+        best = (tmp_path / "experiment" / "resgcn_best.yaml").read_text()
+        assert best.startswith("# @package _global_") and "model:" in best and "lr:" in best
+        # the best experiment overrides existing keys of the training config with valid values
+        from omegaconf import OmegaConf
+
+        train = compose(config_name="train", overrides=train_overrides)
+        merged = OmegaConf.merge(train, OmegaConf.load(tmp_path / "experiment" / "resgcn_best.yaml"))
+        assert set(OmegaConf.to_container(merged.model)) == set(OmegaConf.to_container(train.model))
+        assert len(merged.model.loss_weights) == 3 and merged.model.lr > 0
+        assert isinstance(merged.model.hidden, int) and isinstance(merged.data.batch_size, int)
+
+        cfg2 = compose(config_name="tune", overrides=[o.replace("tune.n_trials=3", "tune.n_trials=4")
+                                                      for o in overrides])
+        study2 = run_study(cfg2, tmp_path / "trials")
+        assert len(study2.trials) == 4  # resumed from the same storage, one more trial
+        assert study2.trials[0].params == study.trials[0].params
