@@ -117,9 +117,17 @@ class SnapshotDataModule(L.LightningDataModule):
 
 
 def expand_files(files) -> list[str]:
-    """Expand glob patterns (a string or a list) into a sorted list of existing files."""
+    """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.collect``) into a sorted list."""
+    from rheograph.collect import index_files
+
     patterns = [files] if isinstance(files, str) else list(files)
-    out = sorted({p for pattern in patterns for p in glob.glob(str(pattern), recursive=True)})
+    out = set()
+    for pattern in patterns:
+        if str(pattern).endswith(".json") and Path(pattern).is_file():
+            out.update(index_files(pattern))
+        else:
+            out.update(glob.glob(str(pattern), recursive=True))
+    out = sorted(out)
     if not out:
         raise FileNotFoundError(f"data.files={patterns} matches no trajectory file")
     return out

@@ -1,0 +1,54 @@
+"""Multirun launchers (joblib, submitit local) and the collect step."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rheograph.collect import build_index, index_files
+from rheograph.learn.datamodule import expand_files
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path):
+    cmd = [sys.executable, str(ROOT / "simulate.py"), "-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
+           "sim=tiny", "sim.stress=1,20", "sim.strain=0.06", "sim.snapshot_interval=0.02",
+           f"output_root={tmp_path}", "progress=false"]
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "Joblib.Parallel(n_jobs=2" in done.stdout + done.stderr
+    files = sorted(tmp_path.glob("multirun/*/trajectory.h5"))
+    assert len(files) == 2 and {f.parent.name.split("_")[2] for f in files} == {"s1", "s20"}
+    (tmp_path / "junk.h5").write_bytes(b"junk")
+    index = build_index([tmp_path])
+    assert len(index["runs"]) == 2 and len(index["skipped"]) == 1
+    assert all(e["status"] == "completed" and e["snapshots"] == 3 for e in index["runs"])
+    path = tmp_path / "index.json"
+    path.write_text(json.dumps(index))
+    assert index_files(path) == [str(f.resolve()) for f in files]
+    assert expand_files(str(path)) == sorted(str(f.resolve()) for f in files)
+
+
+@pytest.mark.slow
+def test_submitit_local_launcher_runs_a_simulation(tmp_path):
+    cmd = [sys.executable, str(ROOT / "simulate.py"), "-m", "hydra/launcher=submitit_local",
+           "hydra.launcher.timeout_min=10", "sim=tiny", "sim.stress=3", "sim.strain=0.03",
+           f"output_root={tmp_path}", "progress=false"]
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert len(list(tmp_path.glob("multirun/*/trajectory.h5"))) == 1
+
+
+def test_slurm_launcher_config_composes():
+    from hydra import compose, initialize_config_dir
+
+    from rheograph.cli import register_resolvers
+
+    register_resolvers()
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=["hydra/launcher=slurm"], return_hydra_config=True)
+    launcher = cfg.hydra.launcher
+    assert launcher._target_.endswith("SlurmLauncher") and launcher.cpus_per_task == 1
