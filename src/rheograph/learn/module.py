@@ -95,6 +95,12 @@ class SurrogateModule(L.LightningModule):
         pred = np.concatenate([p for p, _ in self._outputs[stage]])
         true = np.concatenate([t for _, t in self._outputs[stage]])
         self._outputs[stage].clear()
+        if self.trainer is not None and self.trainer.world_size > 1:
+            # data-parallel: every process holds a shard; gather so that R^2 etc. cover the whole split
+            # (the distributed sampler pads shards to equal length with repeated graphs)
+            both = torch.from_numpy(np.concatenate([pred, true], axis=1)).to(self.device)
+            gathered = self.all_gather(both).reshape(-1, 6).cpu().numpy()
+            pred, true = gathered[:, :3], gathered[:, 3:]
         hp = self.hparams
         metrics = regression_metrics(physical_targets(pred, hp.viscosity_scale, hp.pressure_scale),
                                      physical_targets(true, hp.viscosity_scale, hp.pressure_scale))
