@@ -28,5 +28,5 @@ test: install
 	$(PY) -m pytest -q
 
 lint: install
-	$(VENV)/bin/ruff check src tests bench simulate.py
-	$(VENV)/bin/ruff format --check src tests bench simulate.py
+	$(VENV)/bin/ruff check src tests bench *.py
+	$(VENV)/bin/ruff format --check src tests bench *.py

@@ -41,11 +41,16 @@ def measure(n, disp, integrator, warmup, window, windows):
             sim.step()
         wall, cpu = time.perf_counter() - w0, time.process_time() - c0
         nsteps, dstrain = sim.state.steps - steps0, sim.state.strain - strain0
-        results.append(dict(
-            wall_per_strain=wall / dstrain, cpu_per_strain=cpu / dstrain, steps_per_strain=nsteps / dstrain,
-            us_per_particle_step=1e6 * wall / (nsteps * n), ms_per_step=1e3 * wall / nsteps,
-            **{f"frac_{k}": sim.timings[k] / wall for k in PHASES},
-        ))
+        results.append(
+            dict(
+                wall_per_strain=wall / dstrain,
+                cpu_per_strain=cpu / dstrain,
+                steps_per_strain=nsteps / dstrain,
+                us_per_particle_step=1e6 * wall / (nsteps * n),
+                ms_per_step=1e3 * wall / nsteps,
+                **{f"frac_{k}": sim.timings[k] / wall for k in PHASES},
+            )
+        )
     return {k: float(np.median([r[k] for r in results])) for k in results[0]}
 
 
@@ -74,15 +79,26 @@ def main() -> None:
                 window = max(0.01, args.particle_steps / (n * 15.0 / disp * 1e-3) * 1e-3)
                 r = measure(n, disp, integrator, args.warmup, window, args.windows)
                 ref = LFDEM_CPU_PER_STRAIN.get((n, disp), "–") if integrator == "euler" else "–"
-                line = (f"| {n} | {disp:g} | {integrator} | {r['wall_per_strain']:.1f} | {r['cpu_per_strain']:.1f} | "
-                        f"{ref} | {r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
-                        f"{r['us_per_particle_step']:.2f} | "
-                        + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES) + " |")
+                line = (
+                    f"| {n} | {disp:g} | {integrator} | {r['wall_per_strain']:.1f} | "
+                    f"{r['cpu_per_strain']:.1f} | "
+                    f"{ref} | {r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
+                    f"{r['us_per_particle_step']:.2f} | "
+                    + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES)
+                    + " |"
+                )
                 print(line, flush=True)
                 lines.append(line)
-    lines += ["", "Command: `python bench/simulate_speed.py " + " ".join(
-        f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
-        for k, v in vars(args).items() if k != "no_write") + "`"]
+    lines += [
+        "",
+        "Command: `python bench/simulate_speed.py "
+        + " ".join(
+            f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
+            for k, v in vars(args).items()
+            if k != "no_write"
+        )
+        + "`",
+    ]
     if not args.no_write:
         write_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
 
@@ -93,7 +109,7 @@ def write_section(path: Path, name: str, body: str) -> None:
     text = path.read_text() if path.exists() else "# Benchmarks\n"
     block = f"{start}\n{body}\n{end}"
     if start in text:
-        text = text[: text.index(start)] + block + text[text.index(end) + len(end):]
+        text = text[: text.index(start)] + block + text[text.index(end) + len(end) :]
     else:
         text = text.rstrip() + "\n\n" + block + "\n"
     path.write_text(text)

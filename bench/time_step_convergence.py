@@ -35,8 +35,14 @@ def run(args) -> None:
             for integrator in args.integrators:
                 for disp in args.disp:
                     params = SimParams(
-                        n_particles=args.n, phi=args.phi, stress=stress, seed=seed, strain=args.strain,
-                        disp_max=disp, integrator=integrator, snapshot_interval=args.strain,
+                        n_particles=args.n,
+                        phi=args.phi,
+                        stress=stress,
+                        seed=seed,
+                        strain=args.strain,
+                        disp_max=disp,
+                        integrator=integrator,
+                        snapshot_interval=args.strain,
                         steady_state_strain=args.steady,
                     )
                     path = OUT / (sim_id(args.n, args.phi, stress, seed, disp, integrator) + ".h5")
@@ -48,8 +54,12 @@ def run(args) -> None:
                         prior["strain"] = outcome.strain
                         prior["steps"] = outcome.steps
                         cost_file.write_text(json.dumps(prior))
-                    print(path.name, outcome.status, {k: round(v, 4) for k, v in outcome.summary.items()},
-                          flush=True)
+                    print(
+                        path.name,
+                        outcome.status,
+                        {k: round(v, 4) for k, v in outcome.summary.items()},
+                        flush=True,
+                    )
 
 
 def collect() -> list[dict]:
@@ -59,11 +69,18 @@ def collect() -> list[dict]:
         p = info["params"]
         cost = json.loads(path.with_suffix(".cost.json").read_text())
         ts = read_timeseries(path)
-        rows.append(dict(
-            stress=p["stress"], disp_max=p["disp_max"], integrator=p["integrator"], seed=p["seed"],
-            s_per_strain=cost["wall"] / cost["strain"], steps_per_strain=cost["steps"] / cost["strain"],
-            max_overlap=float(ts["max_overlap"].max()), **info["summary"],
-        ))
+        rows.append(
+            dict(
+                stress=p["stress"],
+                disp_max=p["disp_max"],
+                integrator=p["integrator"],
+                seed=p["seed"],
+                s_per_strain=cost["wall"] / cost["strain"],
+                steps_per_strain=cost["steps"] / cost["strain"],
+                max_overlap=float(ts["max_overlap"].max()),
+                **info["summary"],
+            )
+        )
     return rows
 
 
@@ -76,12 +93,16 @@ def plot(args) -> None:
     rows = collect()
     stresses = sorted({r["stress"] for r in rows})
     fig, axes = plt.subplots(len(stresses), 3, figsize=(13, 3.6 * len(stresses)), squeeze=False)
-    lines = ["| σ/σ0 | integrator | disp_max | η_r (± s.e.) | Π/σ | Z_μ | steps/strain | wall s/strain |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| σ/σ0 | integrator | disp_max | η_r (± s.e.) | Π/σ | Z_μ | steps/strain | wall s/strain |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for row_axes, stress in zip(axes, stresses):
         for integrator, marker in (("euler", "o"), ("implicit", "s")):
-            sel = sorted((r for r in rows if r["stress"] == stress and r["integrator"] == integrator),
-                         key=lambda r: -r["disp_max"])
+            sel = sorted(
+                (r for r in rows if r["stress"] == stress and r["integrator"] == integrator),
+                key=lambda r: -r["disp_max"],
+            )
             if not sel:
                 continue
             cost = np.array([r["s_per_strain"] for r in sel])
@@ -90,8 +111,9 @@ def plot(args) -> None:
                 err = np.array([r[key + "_se"] for r in sel]) * scale
                 ax.errorbar(cost, y, yerr=err, marker=marker, capsize=3, label=integrator)
                 for c, yy, r in zip(cost, y, sel):
-                    ax.annotate(f"{r['disp_max']:g}", (c, yy), textcoords="offset points", xytext=(4, 4),
-                                fontsize=7)
+                    ax.annotate(
+                        f"{r['disp_max']:g}", (c, yy), textcoords="offset points", xytext=(4, 4), fontsize=7
+                    )
             for r in sel:
                 lines.append(
                     f"| {stress:g} | {integrator} | {r['disp_max']:g} | {r['viscosity']:.1f} ± "

@@ -72,8 +72,14 @@ def build_graphs(n_graphs, n_particles, cutoff):
         edge_index, feats = snapshot_edges(pos, radii, box, box, 0.37 * k, cutoff)
         edge_attr = np.stack([feats[f] for f in ("gap", "distance", "dx", "dy", "sin", "cos")], axis=1)
         times.append(time.perf_counter() - t0)
-        graphs.append(Data(x=torch.from_numpy(node_features(radii, 1.4)), edge_index=torch.from_numpy(edge_index),
-                           edge_attr=torch.from_numpy(edge_attr).float(), y=torch.randn(1, 3)))
+        graphs.append(
+            Data(
+                x=torch.from_numpy(node_features(radii, 1.4)),
+                edge_index=torch.from_numpy(edge_index),
+                edge_attr=torch.from_numpy(edge_attr).float(),
+                y=torch.randn(1, 3),
+            )
+        )
     return graphs, float(np.median(times[1:]))
 
 
@@ -82,7 +88,9 @@ def throughput(model, graphs, batch_size, repeats):
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     model.train()
     for batch in loader:  # warm-up
-        loss = nn.functional.smooth_l1_loss(model(batch.x, batch.edge_index, batch.edge_attr, batch.batch), batch.y)
+        loss = nn.functional.smooth_l1_loss(
+            model(batch.x, batch.edge_index, batch.edge_attr, batch.batch), batch.y
+        )
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -115,10 +123,15 @@ def main() -> None:
     ap.add_argument("--layers", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--sim-seconds-per-strain", type=float, default=None,
-                    help="simulator wall s/strain at this N (default: measured value from docs)")
-    ap.add_argument("--sim-strain-per-snapshot", type=float, default=0.5,
-                    help="strain between decorrelated snapshots")
+    ap.add_argument(
+        "--sim-seconds-per-strain",
+        type=float,
+        default=None,
+        help="simulator wall s/strain at this N (default: measured value from docs)",
+    )
+    ap.add_argument(
+        "--sim-strain-per-snapshot", type=float, default=0.5, help="strain between decorrelated snapshots"
+    )
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -126,8 +139,10 @@ def main() -> None:
     graphs, build_time = build_graphs(args.graphs, args.n_particles, 0.5)
     edges = np.mean([g.edge_index.shape[1] for g in graphs])
     rows = []
-    for name, model in (("rheograph ResGCN (batch norm)", ResGCN(2, 6, args.hidden, args.layers)),
-                        ("plain PyG DeeperGCN (layer norm)", PlainDeeperGCN(2, 6, args.hidden, args.layers))):
+    for name, model in (
+        ("rheograph ResGCN (batch norm)", ResGCN(2, 6, args.hidden, args.layers)),
+        ("plain PyG DeeperGCN (layer norm)", PlainDeeperGCN(2, 6, args.hidden, args.layers)),
+    ):
         for bs in (8, 32):
             rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
             train, infer = throughput(model, graphs, bs, args.repeats)
@@ -144,25 +159,40 @@ def main() -> None:
             model(g.x, g.edge_index, g.edge_attr, batch)
             times.append(time.perf_counter() - t0)
     predict_one = float(np.median(times)) + build_time
-    lines = [
-        f"{args.graphs} graphs of N = {args.n_particles} particles (mean {edges:.0f} directed edges, gap cut-off 0.5a), "
-        f"{args.threads} torch threads, OMP_WAIT_POLICY=PASSIVE, medians of {args.repeats} passes.",
-        "",
-        "| model | parameters | batch | train graphs/s | inference graphs/s | peak RSS MiB | RSS growth MiB |",
-        "|---|---|---|---|---|---|---|",
-    ] + [f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.0f} | {r[6]:.0f} |" for r in rows] + [
-        "",
-        f"Graph building (numba cell list with Lees–Edwards images + features): {1e3 * build_time:.2f} ms per "
-        f"N = {args.n_particles} snapshot (median).",
-        f"Predicting one snapshot (graph build + forward pass, batch 1): {1e3 * predict_one:.1f} ms.",
-    ]
+    lines = (
+        [
+            f"{args.graphs} graphs of N = {args.n_particles} particles (mean {edges:.0f} directed edges, "
+            "gap cut-off 0.5a), "
+            f"{args.threads} torch threads, OMP_WAIT_POLICY=PASSIVE, medians of {args.repeats} passes.",
+            "",
+            "| model | parameters | batch | train graphs/s | inference graphs/s | peak RSS MiB "
+            "| RSS growth MiB |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        + [f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.0f} | {r[6]:.0f} |" for r in rows]
+        + [
+            "",
+            "Graph building (numba cell list with Lees–Edwards images + features): "
+            f"{1e3 * build_time:.2f} ms per "
+            f"N = {args.n_particles} snapshot (median).",
+            f"Predicting one snapshot (graph build + forward pass, batch 1): {1e3 * predict_one:.1f} ms.",
+        ]
+    )
     if args.sim_seconds_per_strain:
         produce = args.sim_seconds_per_strain * args.sim_strain_per_snapshot
-        lines.append(f"Simulator: {args.sim_seconds_per_strain:.0f} s/strain at this N → one decorrelated snapshot "
-                     f"every {args.sim_strain_per_snapshot} strain costs {produce:.0f} s: speed-up "
-                     f"{produce / predict_one:.0f}× for the surrogate.")
-    lines += ["", "Command: `python bench/train_speed.py " + " ".join(
-        f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k != "no_write" and v is not None) + "`"]
+        lines.append(
+            f"Simulator: {args.sim_seconds_per_strain:.0f} s/strain at this N → one decorrelated snapshot "
+            f"every {args.sim_strain_per_snapshot} strain costs {produce:.0f} s: speed-up "
+            f"{produce / predict_one:.0f}× for the surrogate."
+        )
+    lines += [
+        "",
+        "Command: `python bench/train_speed.py "
+        + " ".join(
+            f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k != "no_write" and v is not None
+        )
+        + "`",
+    ]
     print("\n".join(lines))
     if not args.no_write:
         from simulate_speed import write_section

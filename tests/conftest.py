@@ -19,11 +19,17 @@ def tiny_files(tmp_path_factory):
     directory = tmp_path_factory.mktemp("tiny")
     files = []
     for stress in (0.5, 5.0, 50.0):
-        params = SimParams(n_particles=64, phi=0.72, stress=stress, strain=0.3, snapshot_interval=0.025,
-                           steady_state_strain=0.05, disp_max=2e-3, integrator="implicit")
+        params = SimParams(
+            n_particles=64,
+            phi=0.72,
+            stress=stress,
+            strain=0.3,
+            snapshot_interval=0.025,
+            steady_state_strain=0.05,
+            disp_max=2e-3,
+            integrator="implicit",
+        )
         path = directory / f"s{stress:g}.h5"
         run_state_point(params, path, progress=False)
         files.append(str(path))
     return files
-
-

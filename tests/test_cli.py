@@ -42,15 +42,22 @@ def test_unknown_key_in_sim_config_is_an_error(tmp_path, monkeypatch):
 
 
 def test_simulate_script_writes_and_resumes(tmp_path):
-    cmd = [sys.executable, str(ROOT / "simulate.py"), "sim=tiny", "sim.strain=0.05",
-           f"output_root={tmp_path}", "progress=false"]
+    cmd = [
+        sys.executable,
+        str(ROOT / "simulate.py"),
+        "sim=tiny",
+        "sim.strain=0.05",
+        f"output_root={tmp_path}",
+        "progress=false",
+    ]
     subprocess.run(cmd, check=True, capture_output=True, cwd=tmp_path)
     files = list(tmp_path.glob("N64_phi0.7_s10_seed1_d0.002_euler/trajectory.h5"))
     assert len(files) == 1
     assert read_run_info(files[0])["status"] == "completed"
     # running it again with a longer strain continues the same file
-    done = subprocess.run(cmd[:3] + ["sim.strain=0.08"] + cmd[4:], check=True, capture_output=True,
-                          text=True, cwd=tmp_path)
+    done = subprocess.run(
+        cmd[:3] + ["sim.strain=0.08"] + cmd[4:], check=True, capture_output=True, text=True, cwd=tmp_path
+    )
     assert "status completed after strain 0.08" in done.stderr + done.stdout
     assert read_run_info(files[0])["strain"] >= 0.08
 

@@ -18,9 +18,20 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
     statistics and the distributed sampler's padding, so 5 % on MAE and 0.05 on R^2 are generous yet
     tight enough to catch metrics computed on one shard only)."""
     pattern = str(Path(tiny_files[0]).parent / "*.h5")
-    base = [f"data.files={pattern}", f"data.cache_dir={tmp_path / 'cache'}", "data.num_folds=3", "fold=0",
-            "graph.min_strain=0.05", "trainer.max_epochs=1", "~logger", "report=false", "model.lr=1e-9",
-            "model.dropout=0.0", "trainer.enable_progress_bar=false", "data.batch_size=4"]
+    base = [
+        f"data.files={pattern}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.num_folds=3",
+        "fold=0",
+        "graph.min_strain=0.05",
+        "trainer.max_epochs=1",
+        "~logger",
+        "report=false",
+        "model.lr=1e-9",
+        "model.dropout=0.0",
+        "trainer.enable_progress_bar=false",
+        "data.batch_size=4",
+    ]
     results = {}
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         for name, extra in (("single", []), ("ddp", ["trainer=ddp", "trainer.devices=2"])):

@@ -32,8 +32,20 @@ def test_assembled_resistance_is_spd_and_matches_dense_pair_sum():
     coeff = lubrication_resistance(s.radii, s.pair_i, s.pair_j, xi, active, p.delta)
     zeros = np.zeros(xi.shape[0])
     data, _ = assemble_resistance(
-        s.radii, s.pair_i, s.pair_j, nvec, dy, coeff, active, in_contact, zeros, zeros,
-        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
+        s.radii,
+        s.pair_i,
+        s.pair_j,
+        nvec,
+        dy,
+        coeff,
+        active,
+        in_contact,
+        zeros,
+        zeros,
+        sim.indptr,
+        sim.pair_slot,
+        sim.diag_slot,
+        sim.indices.shape[0],
     )
     n = s.radii.shape[0]
     dense = dense_from_upper_csc(data, sim.indices, sim.indptr, 3 * n)
@@ -65,7 +77,7 @@ def test_dilute_limit_viscosity_tends_to_one():
     for phi in (0.02, 0.3, 0.6):
         sim = Simulation(SimParams(n_particles=100 if phi > 0.1 else 30, phi=phi, stress=1.0))
         vals = []
-        for k in range(200):
+        for _ in range(200):
             res = sim.step(record=True)
             vals.append(viscosity(res))
         etas[phi] = np.mean(vals)

@@ -57,7 +57,9 @@ def test_edges_match_brute_force_over_all_periodic_images():
 @pytest.mark.parametrize("scale", [0.01, 1.0])
 def test_target_transform_round_trip_everywhere(scale):
     x = np.array([-50.0, -1e-3, 0.0, 1e-6, 0.4, 45.0, 1e4])
-    np.testing.assert_allclose(inverse_transform(forward_transform(x, scale), scale), x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        inverse_transform(forward_transform(x, scale), scale), x, rtol=1e-12, atol=1e-15
+    )
     assert np.all(np.isfinite(forward_transform(x, scale)))
     # log-like above the scale: the paper's log scaling up to a constant
     big = np.array([10.0, 100.0, 1000.0])
@@ -144,11 +146,23 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     from rheograph.learn.train import train_folds
 
     pattern = str(Path(tiny_files[0]).parent / "*.h5")
-    cfg = compose_train([
-        f"data.files={pattern}", f"data.cache_dir={tmp_path / 'cache'}", "data.num_folds=3", "fold=0",
-        "data.batch_size=8", "graph.min_strain=0.05", "trainer.max_epochs=80", "~logger",
-        "trainer.enable_progress_bar=false", "callbacks.early_stopping.patience=1000", "model.hidden=32", "model.lr=2e-3", "model.dropout=0.0",
-    ])
+    cfg = compose_train(
+        [
+            f"data.files={pattern}",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            "data.num_folds=3",
+            "fold=0",
+            "data.batch_size=8",
+            "graph.min_strain=0.05",
+            "trainer.max_epochs=80",
+            "~logger",
+            "trainer.enable_progress_bar=false",
+            "callbacks.early_stopping.patience=1000",
+            "model.hidden=32",
+            "model.lr=2e-3",
+            "model.dropout=0.0",
+        ]
+    )
     run_dir = tmp_path / "run"
     summary = train_folds(cfg, run_dir)
     metrics = json.loads((run_dir / "metrics.json").read_text())
@@ -163,13 +177,17 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     result = predict_file([run_dir / "fold0.pt"], tiny_files[2])
     split = json.loads((run_dir / "fold0_split.json").read_text())
     assert split["test"]
-    for k, name in enumerate(("eta", "pressure", "z_mu")):
+    for name in ("eta", "pressure", "z_mu"):
         assert np.all(np.isfinite(result[f"{name}_pred"]))
     both = np.intersect1d(np.round(saved["true"][:, 0], 9), np.round(result["eta_sim"], 9))
     for value in both:
         a = saved["pred"][np.round(saved["true"][:, 0], 9) == value][0]
-        b = np.array([result[f"{n}_pred"][np.round(result["eta_sim"], 9) == value][0]
-                      for n in ("eta", "pressure", "z_mu")])
+        b = np.array(
+            [
+                result[f"{n}_pred"][np.round(result["eta_sim"], 9) == value][0]
+                for n in ("eta", "pressure", "z_mu")
+            ]
+        )
         np.testing.assert_allclose(a, b, rtol=1e-5)
 
 

@@ -8,8 +8,16 @@ from rheograph.io.hdf5 import TrajectoryFileError, read_run_info, read_timeserie
 from rheograph.runner import run_state_point
 from rheograph.sim.params import ParameterError, SimParams
 
-TINY = dict(n_particles=64, phi=0.74, stress=5.0, strain=0.12, output_interval=0.01,
-            snapshot_interval=0.03, steady_state_strain=0.02, disp_max=2e-3)
+TINY = dict(
+    n_particles=64,
+    phi=0.74,
+    stress=5.0,
+    strain=0.12,
+    output_interval=0.01,
+    snapshot_interval=0.03,
+    steady_state_strain=0.02,
+    disp_max=2e-3,
+)
 
 
 def test_file_layout_and_snapshot_targets(tmp_path):
@@ -125,8 +133,16 @@ def test_unknown_parameter_is_rejected():
 
 @pytest.mark.parametrize("phi,stress", [(0.80, 200.0), (0.82, 1000.0)])
 def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, stress):
-    params = SimParams(n_particles=100, phi=phi, stress=stress, strain=0.05, output_interval=0.005,
-                       snapshot_interval=1.0, disp_max=2e-3, jam_intervals=10**6)
+    params = SimParams(
+        n_particles=100,
+        phi=phi,
+        stress=stress,
+        strain=0.05,
+        output_interval=0.005,
+        snapshot_interval=1.0,
+        disp_max=2e-3,
+        jam_intervals=10**6,
+    )
     out = run_state_point(params, tmp_path / "dense.h5", progress=False, max_steps=4000)
     ts = read_timeseries(tmp_path / "dense.h5")
     assert out.status in ("completed", "interrupted")
@@ -139,8 +155,16 @@ def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, 
 def test_jam_detection_ends_a_stalled_run(tmp_path):
     """A nearly rigid frictional packing above phi_J^mu at high stress stops flowing: the run ends
     as 'jammed' with the jammed rows recorded (jam_viscosity lowered to keep the test short)."""
-    params = SimParams(n_particles=100, phi=0.84, stress=100.0, strain=2.0, jam_viscosity=2e3,
-                       jam_intervals=5, disp_max=2e-3, relax_tolerance=1e-3)
+    params = SimParams(
+        n_particles=100,
+        phi=0.84,
+        stress=100.0,
+        strain=2.0,
+        jam_viscosity=2e3,
+        jam_intervals=5,
+        disp_max=2e-3,
+        relax_tolerance=1e-3,
+    )
     out = run_state_point(params, tmp_path / "jam.h5", progress=False, max_steps=60000)
     ts = read_timeseries(tmp_path / "jam.h5")
     assert out.status == "jammed", (out, ts["viscosity"][-10:])

@@ -14,9 +14,19 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path):
-    cmd = [sys.executable, str(ROOT / "simulate.py"), "-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
-           "sim=tiny", "sim.stress=1,20", "sim.strain=0.06", "sim.snapshot_interval=0.02",
-           f"output_root={tmp_path}", "progress=false"]
+    cmd = [
+        sys.executable,
+        str(ROOT / "simulate.py"),
+        "-m",
+        "hydra/launcher=joblib",
+        "hydra.launcher.n_jobs=2",
+        "sim=tiny",
+        "sim.stress=1,20",
+        "sim.strain=0.06",
+        "sim.snapshot_interval=0.02",
+        f"output_root={tmp_path}",
+        "progress=false",
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "Joblib.Parallel(n_jobs=2" in done.stdout + done.stderr
@@ -34,9 +44,18 @@ def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path
 
 @pytest.mark.slow
 def test_submitit_local_launcher_runs_a_simulation(tmp_path):
-    cmd = [sys.executable, str(ROOT / "simulate.py"), "-m", "hydra/launcher=submitit_local",
-           "hydra.launcher.timeout_min=10", "sim=tiny", "sim.stress=3", "sim.strain=0.03",
-           f"output_root={tmp_path}", "progress=false"]
+    cmd = [
+        sys.executable,
+        str(ROOT / "simulate.py"),
+        "-m",
+        "hydra/launcher=submitit_local",
+        "hydra.launcher.timeout_min=10",
+        "sim=tiny",
+        "sim.stress=3",
+        "sim.strain=0.03",
+        f"output_root={tmp_path}",
+        "progress=false",
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert len(list(tmp_path.glob("multirun/*/trajectory.h5"))) == 1

@@ -16,13 +16,21 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
     pattern = str(Path(tiny_files[0]).parent / "*.h5")
     train_overrides = [
-        f"data.files={pattern}", f"data.cache_dir={tmp_path / 'cache'}", "data.num_folds=3",
-        "graph.min_strain=0.05", "trainer.max_epochs=4", "~logger", "report=false",
+        f"data.files={pattern}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.num_folds=3",
+        "graph.min_strain=0.05",
+        "trainer.max_epochs=4",
+        "~logger",
+        "report=false",
         "trainer.enable_progress_bar=false",
     ]
     overrides = [
-        f"output_root={tmp_path}", f"tune.storage=sqlite:///{tmp_path}/study.db",
-        f"tune.best_experiment_dir={tmp_path}/experiment", "tune.n_trials=3", "tune.pruner.n_startup_trials=1",
+        f"output_root={tmp_path}",
+        f"tune.storage=sqlite:///{tmp_path}/study.db",
+        f"tune.best_experiment_dir={tmp_path}/experiment",
+        "tune.n_trials=3",
+        "tune.pruner.n_startup_trials=1",
         "train_overrides=[" + ",".join(f"'{o}'" for o in train_overrides) + "]",
     ]
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
@@ -52,8 +60,9 @@ def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
         assert len(merged.model.loss_weights) == 3 and merged.model.lr > 0
         assert isinstance(merged.model.hidden, int) and isinstance(merged.data.batch_size, int)
 
-        cfg2 = compose(config_name="tune", overrides=[o.replace("tune.n_trials=3", "tune.n_trials=4")
-                                                      for o in overrides])
+        cfg2 = compose(
+            config_name="tune", overrides=[o.replace("tune.n_trials=3", "tune.n_trials=4") for o in overrides]
+        )
         study2 = run_study(cfg2, tmp_path / "trials")
         assert len(study2.trials) == 4  # resumed from the same storage, one more trial
         assert study2.trials[0].params == study.trials[0].params

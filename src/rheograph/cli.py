@@ -32,11 +32,21 @@ def simulate_main(cfg: DictConfig) -> dict:
     params = SimParams.from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
     run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
     path = run_dir / cfg.output_file
-    log.info("state point %s -> %s", sim_id(params.n_particles, params.phi, params.stress, params.seed,
-                                             params.disp_max, params.integrator), path)
+    log.info(
+        "state point %s -> %s",
+        sim_id(
+            params.n_particles, params.phi, params.stress, params.seed, params.disp_max, params.integrator
+        ),
+        path,
+    )
     outcome = run_state_point(params, path, progress=cfg.progress, solver=cfg.solver)
-    log.info("status %s after strain %.3f (%d steps, %.1f s)", outcome.status, outcome.strain,
-             outcome.steps, outcome.wall_seconds)
+    log.info(
+        "status %s after strain %.3f (%d steps, %.1f s)",
+        outcome.status,
+        outcome.strain,
+        outcome.steps,
+        outcome.wall_seconds,
+    )
     for key in ("viscosity", "pressure", "z_mu", "z"):
         if key in outcome.summary:
             log.info("  steady %s = %.4g +- %.2g", key, outcome.summary[key], outcome.summary[key + "_se"])

@@ -34,9 +34,16 @@ def build_index(directories) -> dict:
             except (OSError, ValueError, KeyError) as exc:
                 skipped.append({"path": str(path), "reason": str(exc)})
                 continue
-            entries.append({"path": str(path.resolve()), "status": info["status"], "strain": info["strain"],
-                            "snapshots": n_snapshots, "params": info["params"],
-                            "summary": {k: float(v) for k, v in info["summary"].items()}})
+            entries.append(
+                {
+                    "path": str(path.resolve()),
+                    "status": info["status"],
+                    "strain": info["strain"],
+                    "snapshots": n_snapshots,
+                    "params": info["params"],
+                    "summary": {k: float(v) for k, v in info["summary"].items()},
+                }
+            )
     return {"format": "rheograph-index-1", "runs": entries, "skipped": skipped}
 
 

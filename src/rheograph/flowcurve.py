@@ -45,10 +45,21 @@ def collect(directories) -> list[dict]:
             groups[key].append(info)
     points = []
     for (n, phi, stress, disp, integrator), infos in sorted(groups.items()):
-        point = dict(n_particles=n, phi=phi, stress=stress, disp_max=disp, integrator=integrator,
-                     n_seeds=len(infos), statuses=sorted({i["status"] for i in infos}),
-                     strain=float(np.mean([i["strain"] for i in infos])))
-        flowing = [i for i in infos if i["status"] == "completed" and np.isfinite(i["summary"].get("viscosity", np.nan))]
+        point = dict(
+            n_particles=n,
+            phi=phi,
+            stress=stress,
+            disp_max=disp,
+            integrator=integrator,
+            n_seeds=len(infos),
+            statuses=sorted({i["status"] for i in infos}),
+            strain=float(np.mean([i["strain"] for i in infos])),
+        )
+        flowing = [
+            i
+            for i in infos
+            if i["status"] == "completed" and np.isfinite(i["summary"].get("viscosity", np.nan))
+        ]
         point["jammed"] = any(i["status"] == "jammed" for i in infos)
         for k in KEYS:
             vals = np.array([i["summary"][k] for i in flowing])
@@ -73,35 +84,54 @@ def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
         d = read_lfdem_data(path)
         stress = float(m.group(3))
         s = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, strain_min)
-        out.append(dict(n_particles=int(m.group(1)), phi=float(m.group(2)), stress=stress,
-                        disp_max=float(m.group(4)), strain=float(d["strain"][-1]), **s))
+        out.append(
+            dict(
+                n_particles=int(m.group(1)),
+                phi=float(m.group(2)),
+                stress=stress,
+                disp_max=float(m.group(4)),
+                strain=float(d["strain"][-1]),
+                **s,
+            )
+        )
     return out
 
 
 def markdown_table(points, reference=()) -> str:
     lines = [
-        "| N | φ | σ/σ0 | disp_max | integrator | seeds | strain | η_r | Π/σ | Π_2D/σ (=1.5Π/σ) | Z_μ | Z | status |",
+        "| N | φ | σ/σ0 | disp_max | integrator | seeds | strain | η_r | Π/σ | Π_2D/σ (=1.5Π/σ) | Z_μ | Z "
+        "| status |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for p in points:
         if p["jammed"] and not np.isfinite(p["viscosity"]):
             vals = "shear-jammed | – | – | – | – "
         else:
-            vals = (f"{p['viscosity']:.1f} ± {p['viscosity_se']:.1f} | {p['pressure'] / p['stress']:.3f} | "
-                    f"{1.5 * p['pressure'] / p['stress']:.3f} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
-                    f"{p['z']:.2f}")
-        lines.append(f"| {p['n_particles']} | {p['phi']:g} | {p['stress']:g} | {p['disp_max']:g} | "
-                     f"{p['integrator']} | {p['n_seeds']} | {p['strain']:.1f} | {vals} | "
-                     f"{','.join(p['statuses'])} |")
+            vals = (
+                f"{p['viscosity']:.1f} ± {p['viscosity_se']:.1f} | {p['pressure'] / p['stress']:.3f} | "
+                f"{1.5 * p['pressure'] / p['stress']:.3f} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
+                f"{p['z']:.2f}"
+            )
+        lines.append(
+            f"| {p['n_particles']} | {p['phi']:g} | {p['stress']:g} | {p['disp_max']:g} | "
+            f"{p['integrator']} | {p['n_seeds']} | {p['strain']:.1f} | {vals} | "
+            f"{','.join(p['statuses'])} |"
+        )
     if reference:
-        lines += ["", "LF_DEM reference (same estimator, strain ≥ 1):", "",
-                  "| N | φ | σ/σ0 | disp_max | strain | η_r | Π/σ | Π_2D/σ | Z_μ | Z |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            "LF_DEM reference (same estimator, strain ≥ 1):",
+            "",
+            "| N | φ | σ/σ0 | disp_max | strain | η_r | Π/σ | Π_2D/σ | Z_μ | Z |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
         for r in reference:
-            lines.append(f"| {r['n_particles']} | {r['phi']:g} | {r['stress']:g} | {r['disp_max']:g} | "
-                         f"{r['strain']:.1f} | {r['viscosity']:.1f} ± {r['viscosity_se']:.1f} | "
-                         f"{r['pressure'] / r['stress']:.3f} | {1.5 * r['pressure'] / r['stress']:.3f} | "
-                         f"{r['z_mu']:.2f} | {r['z']:.2f} |")
+            lines.append(
+                f"| {r['n_particles']} | {r['phi']:g} | {r['stress']:g} | {r['disp_max']:g} | "
+                f"{r['strain']:.1f} | {r['viscosity']:.1f} ± {r['viscosity_se']:.1f} | "
+                f"{r['pressure'] / r['stress']:.3f} | {1.5 * r['pressure'] / r['stress']:.3f} | "
+                f"{r['z_mu']:.2f} | {r['z']:.2f} |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -119,7 +149,7 @@ def plot(points, reference, out_png: Path) -> None:
         pts = sorted(pts, key=lambda q: q["stress"])
         s = np.array([q["stress"] for q in pts])
         label = f"φ={phi:g} (disp_max {disp:g}, {integrator})"
-        for ax, key, scale in zip(axes, ("viscosity", "pressure", "z_mu"), (False, True, False)):
+        for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
             y = np.array([q[key] for q in pts])
             e = np.array([q[key + "_se"] for q in pts])
             ax.errorbar(s, y, yerr=e, marker="o", capsize=3, label=label)
@@ -130,8 +160,15 @@ def plot(points, reference, out_png: Path) -> None:
         ref = sorted((r for r in reference if r["disp_max"] == r_disp), key=lambda q: q["stress"])
         s = np.array([r["stress"] for r in ref])
         for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
-            ax.errorbar(s, [r[key] for r in ref], yerr=[r[key + "_se"] for r in ref], fmt="^", mfc="none",
-                        capsize=2, label=f"LF_DEM φ={ref[0]['phi']:g} disp_max {r_disp:g}")
+            ax.errorbar(
+                s,
+                [r[key] for r in ref],
+                yerr=[r[key + "_se"] for r in ref],
+                fmt="^",
+                mfc="none",
+                capsize=2,
+                label=f"LF_DEM φ={ref[0]['phi']:g} disp_max {r_disp:g}",
+            )
     for ax, label, logy in zip(axes, ("η_r", "Π / σ0  (−tr σ / 3)", "Z_μ"), (True, True, False)):
         ax.set_xscale("log")
         if logy:

@@ -59,7 +59,10 @@ class _StopFlag:
 
 
 def run_state_point(
-    params: SimParams, path: str | Path, progress: bool = True, solver: str = "qdldl",
+    params: SimParams,
+    path: str | Path,
+    progress: bool = True,
+    solver: str = "qdldl",
     max_steps: int | None = None,
 ) -> RunOutcome:
     """Simulate ``params`` into ``path`` (created, or resumed from its last checkpoint).
@@ -93,13 +96,23 @@ def run_state_point(
     def save():
         traj.write_checkpoint(
             s,
-            dict(next_output=next_output, next_snapshot=next_snapshot, last_row_time=last_row_time,
-                 last_row_strain=last_row_strain, jam_run=jam_run),
+            dict(
+                next_output=next_output,
+                next_snapshot=next_snapshot,
+                last_row_time=last_row_time,
+                last_row_strain=last_row_strain,
+                jam_run=jam_run,
+            ),
         )
 
-    bar = tqdm(total=params.strain, initial=round(s.strain, 4), unit="strain", disable=not progress,
-               mininterval=1.0,
-               bar_format="{l_bar}{bar}| {n:.3f}/{total:.3g} [{elapsed}<{remaining}{postfix}]")
+    bar = tqdm(
+        total=params.strain,
+        initial=round(s.strain, 4),
+        unit="strain",
+        disable=not progress,
+        mininterval=1.0,
+        bar_format="{l_bar}{bar}| {n:.3f}/{total:.3g} [{elapsed}<{remaining}{postfix}]",
+    )
     try:
         with _StopFlag() as stop:
             while True:
@@ -145,13 +158,26 @@ def run_state_point(
                         or params.stress * (row_time - last_row_time) / d_strain > params.jam_viscosity
                     )
                     jam_run = jam_run + 1 if jammed else 0
-                    traj.append_row(dict(
-                        time=row_time, strain=row_strain, shear_rate=result.shear_rate, viscosity=eta,
-                        pressure=pressure, z_mu=z_mu, z=z, max_overlap=result.max_overlap,
-                        max_stretch=result.max_stretch, dt=result.dt, steps=s.steps - 1, jammed=jammed,
-                        stress=result.stress, stress_lubrication=result.stress_lubrication,
-                        stress_contact=result.stress_contact, stress_solvent=result.stress_solvent,
-                    ))
+                    traj.append_row(
+                        dict(
+                            time=row_time,
+                            strain=row_strain,
+                            shear_rate=result.shear_rate,
+                            viscosity=eta,
+                            pressure=pressure,
+                            z_mu=z_mu,
+                            z=z,
+                            max_overlap=result.max_overlap,
+                            max_stretch=result.max_stretch,
+                            dt=result.dt,
+                            steps=s.steps - 1,
+                            jammed=jammed,
+                            stress=result.stress,
+                            stress_lubrication=result.stress_lubrication,
+                            stress_contact=result.stress_contact,
+                            stress_solvent=result.stress_solvent,
+                        )
+                    )
                     last_row_time, last_row_strain = row_time, row_strain
                     if row_strain >= next_output:
                         next_output = (math.floor(row_strain / oi + 1e-9) + 1) * oi
@@ -161,19 +187,34 @@ def run_state_point(
                     bar.update(min(round(s.strain, 4), params.strain) - bar.n)
                 if snap_due:
                     pairs, states, stretch = result.contacts
-                    traj.append_snapshot(dict(
-                        time=snap_time, strain=snap_strain, le_offset=snap_offset,
-                        shear_rate=result.shear_rate, viscosity=eta, pressure=pressure, z_mu=z_mu, z=z,
-                        positions=snap_positions,
-                        contact_pairs=pairs, contact_state=states, contact_stretch=stretch,
-                    ))
+                    traj.append_snapshot(
+                        dict(
+                            time=snap_time,
+                            strain=snap_strain,
+                            le_offset=snap_offset,
+                            shear_rate=result.shear_rate,
+                            viscosity=eta,
+                            pressure=pressure,
+                            z_mu=z_mu,
+                            z=z,
+                            positions=snap_positions,
+                            contact_pairs=pairs,
+                            contact_state=states,
+                            contact_stretch=stretch,
+                        )
+                    )
                     next_snapshot = (math.floor(snap_strain / params.snapshot_interval + 1e-9) + 1) * (
                         params.snapshot_interval
                     )
         save()
         ts = {name: traj.h5["timeseries"][name][()] for name in traj.h5["timeseries"]}
         summary = steady_state_summary(
-            ts["strain"], ts["time"], ts["pressure"], ts["z_mu"], ts["z"], params.stress,
+            ts["strain"],
+            ts["time"],
+            ts["pressure"],
+            ts["z_mu"],
+            ts["z"],
+            params.stress,
             params.steady_state_strain,
         )
         summary["max_overlap"] = float(ts["max_overlap"].max()) if ts["max_overlap"].size else 0.0

@@ -39,24 +39,32 @@ class GraphSettings:
             raise ValueError(f"graph.cutoff={self.cutoff} is invalid: allowed 0 < cutoff <= 5 (units of a)")
         unknown = set(self.edge_features) - set(EDGE_FEATURES)
         if unknown or not self.edge_features:
-            raise ValueError(f"graph.edge_features={list(self.edge_features)}: allowed a non-empty subset "
-                             f"of {list(EDGE_FEATURES)}")
+            raise ValueError(
+                f"graph.edge_features={list(self.edge_features)}: allowed a non-empty subset "
+                f"of {list(EDGE_FEATURES)}"
+            )
         for name in ("viscosity_scale", "pressure_scale"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"graph.{name} must be > 0")
 
     def transform_targets(self, eta, pressure, z_mu) -> np.ndarray:
-        return np.stack([
-            forward_transform(eta, self.viscosity_scale),
-            forward_transform(pressure, self.pressure_scale),
-            np.asarray(z_mu, dtype=np.float64),
-        ], axis=-1)
+        return np.stack(
+            [
+                forward_transform(eta, self.viscosity_scale),
+                forward_transform(pressure, self.pressure_scale),
+                np.asarray(z_mu, dtype=np.float64),
+            ],
+            axis=-1,
+        )
 
 
 def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> list[Data]:
     """Graphs of every snapshot (strain >= min_strain, finite targets) of one trajectory file."""
     with h5py.File(path, "r") as h5:
-        if h5.attrs.get("producer") != "rheograph" or int(h5.attrs.get("schema_version", -1)) != SCHEMA_VERSION:
+        if (
+            h5.attrs.get("producer") != "rheograph"
+            or int(h5.attrs.get("schema_version", -1)) != SCHEMA_VERSION
+        ):
             raise ValueError(f"{path}: not a rheograph trajectory of schema {SCHEMA_VERSION}")
         params = json.loads(h5.attrs["params"])
         lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
@@ -73,15 +81,19 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
         edge_index, feats = snapshot_edges(positions[k], radii, lx, ly, offsets[idx], settings.cutoff)
         edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
         y = settings.transform_targets(*raw[idx])
-        graphs.append(Data(
-            x=x, edge_index=torch.from_numpy(edge_index).long(),
-            edge_attr=torch.from_numpy(edge_attr).float(),
-            y=torch.from_numpy(y).float().view(1, 3),
-            y_raw=torch.from_numpy(raw[idx]).double().view(1, 3),
-            phi=torch.tensor([params["phi"]], dtype=torch.float64),
-            stress=torch.tensor([params["stress"]], dtype=torch.float64),
-            strain=torch.tensor([strain[idx]], dtype=torch.float64), run_id=torch.tensor([run_id]),
-        ))
+        graphs.append(
+            Data(
+                x=x,
+                edge_index=torch.from_numpy(edge_index).long(),
+                edge_attr=torch.from_numpy(edge_attr).float(),
+                y=torch.from_numpy(y).float().view(1, 3),
+                y_raw=torch.from_numpy(raw[idx]).double().view(1, 3),
+                phi=torch.tensor([params["phi"]], dtype=torch.float64),
+                stress=torch.tensor([params["stress"]], dtype=torch.float64),
+                strain=torch.tensor([strain[idx]], dtype=torch.float64),
+                run_id=torch.tensor([run_id]),
+            )
+        )
     return graphs
 
 
@@ -102,8 +114,16 @@ class SnapshotGraphDataset(InMemoryDataset):
         if not self.files:
             raise FileNotFoundError("no trajectory files given to the graph dataset")
         self.settings = settings
-        key = json.dumps({"settings": asdict(settings), "files": _files_fingerprint(self.files),
-                          "schema": SCHEMA_VERSION, "version": 1}, sort_keys=True, default=list)
+        key = json.dumps(
+            {
+                "settings": asdict(settings),
+                "files": _files_fingerprint(self.files),
+                "schema": SCHEMA_VERSION,
+                "version": 1,
+            },
+            sort_keys=True,
+            default=list,
+        )
         self.digest = hashlib.sha1(key.encode()).hexdigest()[:16]
         super().__init__(root=str(Path(cache_dir) / self.digest))
         self.load(self.processed_paths[0])

@@ -54,6 +54,7 @@ def node_features(radii, size_ratio):
 # reals, odd, invertible, and equals log(2 x / s) + O((s/x)^2) for x >> s, i.e. the paper's log scaling
 # up to a constant once x is a few s.
 
+
 def forward_transform(value, scale):
     return np.arcsinh(np.asarray(value, dtype=np.float64) / scale)
 

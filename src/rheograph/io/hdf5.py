@@ -28,8 +28,18 @@ SCHEMA_VERSION = 1
 PRODUCER = "rheograph"
 
 TIMESERIES_SCALARS = (
-    "time", "strain", "shear_rate", "viscosity", "pressure", "z_mu", "z", "max_overlap", "max_stretch",
-    "dt", "steps", "jammed",
+    "time",
+    "strain",
+    "shear_rate",
+    "viscosity",
+    "pressure",
+    "z_mu",
+    "z",
+    "max_overlap",
+    "max_stretch",
+    "dt",
+    "steps",
+    "jammed",
 )
 TIMESERIES_TENSORS = ("stress", "stress_lubrication", "stress_contact", "stress_solvent")
 SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "pressure", "z_mu", "z")
@@ -83,8 +93,12 @@ class TrajectoryFile:
             sn.create_dataset(
                 "positions", shape=(0, n, 2), maxshape=(None, n, 2), dtype=np.float64, chunks=(1, n, 2)
             )
-            sn.create_dataset("contact_offset", data=np.zeros(1, dtype=np.int64), maxshape=(None,), chunks=(64,))
-            sn.create_dataset("contact_pairs", shape=(0, 2), maxshape=(None, 2), dtype=np.int64, chunks=(1024, 2))
+            sn.create_dataset(
+                "contact_offset", data=np.zeros(1, dtype=np.int64), maxshape=(None,), chunks=(64,)
+            )
+            sn.create_dataset(
+                "contact_pairs", shape=(0, 2), maxshape=(None, 2), dtype=np.int64, chunks=(1024, 2)
+            )
             sn.create_dataset("contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,))
             sn.create_dataset(
                 "contact_stretch", shape=(0, 2), maxshape=(None, 2), dtype=np.float64, chunks=(1024, 2)

@@ -95,16 +95,28 @@ class SnapshotDataModule(L.LightningDataModule):
         self.target_std = y.std(dim=0).clamp_min(1e-6)
 
     def split_record(self) -> dict:
-        return {"split": self.split, "split_seed": self.split_seed, "fold": self.fold,
-                "num_folds": self.num_folds, "train": self.train_idx.tolist(), "val": self.val_idx.tolist(),
-                "test": self.test_idx.tolist(), "files": self.files, "cache": self.dataset.digest}
+        return {
+            "split": self.split,
+            "split_seed": self.split_seed,
+            "fold": self.fold,
+            "num_folds": self.num_folds,
+            "train": self.train_idx.tolist(),
+            "val": self.val_idx.tolist(),
+            "test": self.test_idx.tolist(),
+            "files": self.files,
+            "cache": self.dataset.digest,
+        }
 
     def save_split(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.split_record()))
 
     def _loader(self, idx, shuffle):
-        return DataLoader(self.dataset[torch.as_tensor(idx)], batch_size=self.batch_size, shuffle=shuffle,
-                          num_workers=self.num_workers)
+        return DataLoader(
+            self.dataset[torch.as_tensor(idx)],
+            batch_size=self.batch_size,
+            shuffle=shuffle,
+            num_workers=self.num_workers,
+        )
 
     def train_dataloader(self):
         return self._loader(self.train_idx, True)

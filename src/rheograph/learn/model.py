@@ -16,9 +16,19 @@ class ResGCN(nn.Module):
     Shapes: x (N, node_in), edge_attr (E, edge_in), batch (N,) -> (G, out_channels).
     """
 
-    def __init__(self, node_in: int, edge_in: int, hidden: int = 64, num_layers: int = 2,
-                 aggr: str = "softmax", block: str = "res+", dropout: float = 0.1, pool: str = "mean",
-                 out_channels: int = 3, mlp_layers: int = 2):
+    def __init__(
+        self,
+        node_in: int,
+        edge_in: int,
+        hidden: int = 64,
+        num_layers: int = 2,
+        aggr: str = "softmax",
+        block: str = "res+",
+        dropout: float = 0.1,
+        pool: str = "mean",
+        out_channels: int = 3,
+        mlp_layers: int = 2,
+    ):
         super().__init__()
         if block not in BLOCKS:
             raise ValueError(f"model.block={block!r} is invalid: allowed {BLOCKS}")
@@ -31,10 +41,26 @@ class ResGCN(nn.Module):
         self.edge_encoder = nn.Linear(edge_in, hidden)
         self.layers = nn.ModuleList()
         for _ in range(num_layers):
-            conv = GENConv(hidden, hidden, aggr=aggr, t=1.0, learn_t=aggr == "softmax",
-                           num_layers=mlp_layers, norm="batch", edge_dim=hidden)
-            self.layers.append(DeepGCNLayer(conv, nn.BatchNorm1d(hidden), nn.ReLU(inplace=True),
-                                            block=block, dropout=dropout, ckpt_grad=False))
+            conv = GENConv(
+                hidden,
+                hidden,
+                aggr=aggr,
+                t=1.0,
+                learn_t=aggr == "softmax",
+                num_layers=mlp_layers,
+                norm="batch",
+                edge_dim=hidden,
+            )
+            self.layers.append(
+                DeepGCNLayer(
+                    conv,
+                    nn.BatchNorm1d(hidden),
+                    nn.ReLU(inplace=True),
+                    block=block,
+                    dropout=dropout,
+                    ckpt_grad=False,
+                )
+            )
         self.dropout = dropout
         self.pool = POOLS[pool]
         self.head = nn.Linear(hidden, out_channels)
@@ -57,4 +83,3 @@ class ResGCN(nn.Module):
 
 def count_parameters(model: nn.Module) -> int:
     return sum(p.numel() for p in model.parameters() if p.requires_grad)
-

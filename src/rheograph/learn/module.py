@@ -16,8 +16,10 @@ TARGET_NAMES = ("eta", "pressure", "z_mu")
 def physical_targets(y_transformed: np.ndarray, viscosity_scale: float, pressure_scale: float) -> np.ndarray:
     """Invert the target transforms: (G, 3) transformed -> (G, 3) [eta_r, Pi, Z_mu] in physical units."""
     y = np.asarray(y_transformed, dtype=np.float64)
-    return np.stack([inverse_transform(y[:, 0], viscosity_scale), inverse_transform(y[:, 1], pressure_scale),
-                     y[:, 2]], axis=1)
+    return np.stack(
+        [inverse_transform(y[:, 0], viscosity_scale), inverse_transform(y[:, 1], pressure_scale), y[:, 2]],
+        axis=1,
+    )
 
 
 def regression_metrics(pred: np.ndarray, true: np.ndarray) -> dict:
@@ -41,10 +43,23 @@ class SurrogateModule(L.LightningModule):
     hyperparameters, so a checkpoint alone maps graphs to physical eta_r, Pi, Z_mu.
     """
 
-    def __init__(self, node_in: int = 2, edge_in: int = 6, hidden: int = 64, num_layers: int = 2,
-                 aggr: str = "softmax", block: str = "res+", dropout: float = 0.1, pool: str = "mean",
-                 lr: float = 5e-3, weight_decay: float = 0.0, loss_weights=(1.0, 1.0, 1.0),
-                 huber_beta: float = 1.0, viscosity_scale: float = 1.0, pressure_scale: float = 0.1):
+    def __init__(
+        self,
+        node_in: int = 2,
+        edge_in: int = 6,
+        hidden: int = 64,
+        num_layers: int = 2,
+        aggr: str = "softmax",
+        block: str = "res+",
+        dropout: float = 0.1,
+        pool: str = "mean",
+        lr: float = 5e-3,
+        weight_decay: float = 0.0,
+        loss_weights=(1.0, 1.0, 1.0),
+        huber_beta: float = 1.0,
+        viscosity_scale: float = 1.0,
+        pressure_scale: float = 0.1,
+    ):
         super().__init__()
         self.save_hyperparameters()
         if lr <= 0:
@@ -73,7 +88,9 @@ class SurrogateModule(L.LightningModule):
         per_target = self.huber(z, target).mean(dim=0)
         loss = (per_target * self.loss_weights).sum()
         size = batch.num_graphs
-        self.log(f"{stage}/loss", loss, batch_size=size, on_epoch=True, on_step=False, prog_bar=stage == "val")
+        self.log(
+            f"{stage}/loss", loss, batch_size=size, on_epoch=True, on_step=False, prog_bar=stage == "val"
+        )
         for k, name in enumerate(TARGET_NAMES):
             self.log(f"{stage}/loss_{name}", per_target[k], batch_size=size, on_epoch=True, on_step=False)
         pred = (z * self.target_std + self.target_mean).detach()
@@ -102,8 +119,10 @@ class SurrogateModule(L.LightningModule):
             gathered = self.all_gather(both).reshape(-1, 6).cpu().numpy()
             pred, true = gathered[:, :3], gathered[:, 3:]
         hp = self.hparams
-        metrics = regression_metrics(physical_targets(pred, hp.viscosity_scale, hp.pressure_scale),
-                                     physical_targets(true, hp.viscosity_scale, hp.pressure_scale))
+        metrics = regression_metrics(
+            physical_targets(pred, hp.viscosity_scale, hp.pressure_scale),
+            physical_targets(true, hp.viscosity_scale, hp.pressure_scale),
+        )
         self.log_dict({f"{stage}/{k}": v for k, v in metrics.items()}, on_epoch=True)
 
     def on_train_epoch_end(self):

@@ -48,8 +48,11 @@ def predict_file(model_paths, trajectory: str | Path) -> dict:
         pred, true, meta = predict_dataset(module, graphs)
         preds.append(pred)
     preds = np.stack(preds)  # (models, S, 3)
-    out = {"strain": np.array([g.strain.item() for g in graphs]), "stress": meta["stress"],
-           "phi": meta["phi"]}
+    out = {
+        "strain": np.array([g.strain.item() for g in graphs]),
+        "stress": meta["stress"],
+        "phi": meta["phi"],
+    }
     for k, name in enumerate(TARGET_NAMES):
         out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
         out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
@@ -76,8 +79,13 @@ def main(argv=None) -> None:
             h5.attrs["models"] = [str(p) for p in paths]
     else:
         cols = list(result)
-        np.savetxt(out, np.stack([result[c] for c in cols], axis=1), delimiter=",", header=",".join(cols),
-                   comments="")
+        np.savetxt(
+            out,
+            np.stack([result[c] for c in cols], axis=1),
+            delimiter=",",
+            header=",".join(cols),
+            comments="",
+        )
     print(f"{len(result['strain'])} snapshots, {len(paths)} model(s) -> {out}")
 
 

@@ -19,23 +19,41 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
     import matplotlib.pyplot as plt
 
     run_dir = Path(run_dir)
-    lines = [f"# Surrogate report ({len(fold_results)} fold(s), split: **{split}**)", "",
-             "Test-fold metrics in physical units (η_r, Π in σ0, Z_μ).", "",
-             "| fold | " + " | ".join(f"R² {LABELS[t]} | MAE {LABELS[t]}" for t in TARGET_NAMES) + " |",
-             "|---|" + "---|---|" * len(TARGET_NAMES)]
+    lines = [
+        f"# Surrogate report ({len(fold_results)} fold(s), split: **{split}**)",
+        "",
+        "Test-fold metrics in physical units (η_r, Π in σ0, Z_μ).",
+        "",
+        "| fold | " + " | ".join(f"R² {LABELS[t]} | MAE {LABELS[t]}" for t in TARGET_NAMES) + " |",
+        "|---|" + "---|---|" * len(TARGET_NAMES),
+    ]
     for r in fold_results:
-        lines.append(f"| {r['fold']} | " + " | ".join(
-            f"{r[f'test/r2_{t}']:.4f} | {r[f'test/mae_{t}']:.4g}" for t in TARGET_NAMES) + " |")
+        lines.append(
+            f"| {r['fold']} | "
+            + " | ".join(f"{r[f'test/r2_{t}']:.4f} | {r[f'test/mae_{t}']:.4g}" for t in TARGET_NAMES)
+            + " |"
+        )
 
     def mean_std(key):
         v = np.array([r[key] for r in fold_results])
         return f"{v.mean():.4f} ± {v.std(ddof=1) if v.size > 1 else 0.0:.4f}"
 
-    lines.append("| mean ± std | " + " | ".join(
-        f"{mean_std(f'test/r2_{t}')} | {mean_std(f'test/mae_{t}')}" for t in TARGET_NAMES) + " |")
+    lines.append(
+        "| mean ± std | "
+        + " | ".join(f"{mean_std(f'test/r2_{t}')} | {mean_std(f'test/mae_{t}')}" for t in TARGET_NAMES)
+        + " |"
+    )
     n_test = sum(p["pred"].shape[0] for p in predictions)
-    lines += ["", f"{n_test} test graphs in all.", "",
-              "![parity](parity.png)", "", "![flow curves](flow_curves.png)", "", "![errors](mae_distribution.png)"]
+    lines += [
+        "",
+        f"{n_test} test graphs in all.",
+        "",
+        "![parity](parity.png)",
+        "",
+        "![flow curves](flow_curves.png)",
+        "",
+        "![errors](mae_distribution.png)",
+    ]
     (run_dir / "report.md").write_text("\n".join(lines) + "\n")
 
     pred = np.concatenate([p["pred"] for p in predictions])
@@ -45,7 +63,10 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
     for k, (ax, t) in enumerate(zip(axes, TARGET_NAMES)):
-        lo, hi = float(min(true[:, k].min(), pred[:, k].min())), float(max(true[:, k].max(), pred[:, k].max()))
+        lo, hi = (
+            float(min(true[:, k].min(), pred[:, k].min())),
+            float(max(true[:, k].max(), pred[:, k].max())),
+        )
         grid = np.linspace(lo, hi, 50)
         ax.plot(grid, grid, "k-", lw=1)
         ax.plot(grid, 1.15 * grid, "b--", lw=0.8)
@@ -94,9 +115,8 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
     plt.close(fig)
 
     try:  # the parity plot as a TensorBoard figure, next to the scalars
-        from torch.utils.tensorboard import SummaryWriter
-
         import matplotlib.image as mpimg
+        from torch.utils.tensorboard import SummaryWriter
 
         writer = SummaryWriter(str(run_dir / "tensorboard" / "report"))
         for name in ("parity", "flow_curves", "mae_distribution"):

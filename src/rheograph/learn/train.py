@@ -13,7 +13,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from rheograph.graphs.dataset import GraphSettings
-from rheograph.learn.module import TARGET_NAMES, physical_targets, regression_metrics
+from rheograph.learn.module import TARGET_NAMES, physical_targets
 
 log = logging.getLogger("rheograph.train")
 
@@ -35,11 +35,17 @@ def ensure_dataset(cfg: DictConfig) -> None:
     for phi in spec.phi:
         for stress in spec.stress:
             for seed in spec.seeds:
-                values = {**OmegaConf.to_container(base), **OmegaConf.to_container(spec.overrides),
-                          "phi": float(phi), "stress": float(stress), "seed": int(seed)}
+                values = {
+                    **OmegaConf.to_container(base),
+                    **OmegaConf.to_container(spec.overrides),
+                    "phi": float(phi),
+                    "stress": float(stress),
+                    "seed": int(seed),
+                }
                 params = SimParams.from_mapping(values)
-                path = directory / (sim_id(params.n_particles, phi, stress, seed, params.disp_max,
-                                           params.integrator) + ".h5")
+                path = directory / (
+                    sim_id(params.n_particles, phi, stress, seed, params.disp_max, params.integrator) + ".h5"
+                )
                 if path.exists():
                     from rheograph.io.hdf5 import read_run_info
 
@@ -58,14 +64,17 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
 def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str) -> None:
     """A checkpoint loadable with torch.load(weights_only=True): tensors and plain Python values only."""
     hp = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(module.hparams).items()}
-    torch.save({
-        "format": "rheograph-surrogate-1",
-        "state_dict": module.state_dict(),
-        "hparams": hp,
-        "graph": {**settings.__dict__, "edge_features": list(settings.edge_features)},
-        "fold": fold,
-        "split": split,
-    }, path)
+    torch.save(
+        {
+            "format": "rheograph-surrogate-1",
+            "state_dict": module.state_dict(),
+            "hparams": hp,
+            "graph": {**settings.__dict__, "edge_features": list(settings.edge_features)},
+            "fold": fold,
+            "split": split,
+        },
+        path,
+    )
 
 
 def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
@@ -89,21 +98,29 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
         dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
         dm.setup()
         dm.save_split(run_dir / f"fold{k}_split.json")
-        module = instantiate(cfg.model, edge_in=len(settings.edge_features),
-                             viscosity_scale=settings.viscosity_scale, pressure_scale=settings.pressure_scale,
-                             _convert_="all")
+        module = instantiate(
+            cfg.model,
+            edge_in=len(settings.edge_features),
+            viscosity_scale=settings.viscosity_scale,
+            pressure_scale=settings.pressure_scale,
+            _convert_="all",
+        )
         module.set_target_scaling(dm.target_mean, dm.target_std)
         callbacks = [instantiate(c) for c in cfg.callbacks.values()]
         logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
-        trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=logger,
-                              default_root_dir=str(run_dir / f"fold{k}"))
+        trainer = instantiate(
+            cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=str(run_dir / f"fold{k}")
+        )
         trainer.fit(module, datamodule=dm)
         ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
         if ckpt is not None and ckpt.best_model_path:
             state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
             module.load_state_dict(state)
-        best_val = float(ckpt.best_model_score) if ckpt is not None and ckpt.best_model_score is not None \
+        best_val = (
+            float(ckpt.best_model_score)
+            if ckpt is not None and ckpt.best_model_score is not None
             else float(trainer.callback_metrics.get("val/loss", np.nan))
+        )
         if not np.isfinite(best_val):
             raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
         test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
@@ -113,8 +130,10 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
         result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
         fold_results.append(result)
         if logger:
-            logger.log_hyperparams(_flat_hparams(cfg), {"hp/" + key.replace("/", "_"): v
-                                                         for key, v in result.items() if key != "fold"})
+            logger.log_hyperparams(
+                _flat_hparams(cfg),
+                {"hp/" + key.replace("/", "_"): v for key, v in result.items() if key != "fold"},
+            )
         if trial is not None:
             trial.report(float(np.mean([r["val/loss"] for r in fold_results])), step=len(fold_results))
             if trial.should_prune():
@@ -122,9 +141,12 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
 
                 raise optuna.TrialPruned(f"pruned after fold {k}")
     np.savez(run_dir / "test_predictions.npz", **_stack_predictions(predictions))
-    summary = {key: float(np.mean([r[key] for r in fold_results])) for key in fold_results[0] if key != "fold"}
-    (run_dir / "metrics.json").write_text(json.dumps({"folds": fold_results, "mean": summary,
-                                                      "split": cfg.data.split}, indent=1))
+    summary = {
+        key: float(np.mean([r[key] for r in fold_results])) for key in fold_results[0] if key != "fold"
+    }
+    (run_dir / "metrics.json").write_text(
+        json.dumps({"folds": fold_results, "mean": summary, "split": cfg.data.split}, indent=1)
+    )
     if cfg.get("report", True):
         from rheograph.learn.report import write_report
 
@@ -147,8 +169,11 @@ def predict_dataset(module, dataset, batch_size: int = 64):
         run.append(batch.run_id.numpy())
     hp = module.hparams
     pred = physical_targets(np.concatenate(preds), hp.viscosity_scale, hp.pressure_scale)
-    return pred, np.concatenate(trues), {"stress": np.concatenate(stress), "phi": np.concatenate(phi),
-                                         "run_id": np.concatenate(run)}
+    return (
+        pred,
+        np.concatenate(trues),
+        {"stress": np.concatenate(stress), "phi": np.concatenate(phi), "run_id": np.concatenate(run)},
+    )
 
 
 def _stack_predictions(predictions) -> dict:

@@ -29,9 +29,13 @@ def suggest(trial: optuna.Trial, name: str, spec: dict):
         labels = {str(c): c for c in spec["choices"]}
         return labels[trial.suggest_categorical(name, list(labels))]
     if kind == "int":
-        return trial.suggest_int(name, spec["low"], spec["high"], step=spec.get("step", 1), log=spec.get("log", False))
+        return trial.suggest_int(
+            name, spec["low"], spec["high"], step=spec.get("step", 1), log=spec.get("log", False)
+        )
     if kind == "float":
-        return trial.suggest_float(name, spec["low"], spec["high"], step=spec.get("step"), log=spec.get("log", False))
+        return trial.suggest_float(
+            name, spec["low"], spec["high"], step=spec.get("step"), log=spec.get("log", False)
+        )
     raise ValueError(f"search space entry {name}: unknown type {kind!r} (categorical, int, float)")
 
 
@@ -62,16 +66,24 @@ def make_objective(cfg: DictConfig, run_root: Path):
 def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     t = cfg.tune
     study = optuna.create_study(
-        study_name=t.study_name, storage=t.storage, load_if_exists=True, direction=t.direction,
+        study_name=t.study_name,
+        storage=t.storage,
+        load_if_exists=True,
+        direction=t.direction,
         sampler=optuna.samplers.TPESampler(seed=t.sampler_seed),
-        pruner=optuna.pruners.MedianPruner(n_startup_trials=t.pruner.n_startup_trials,
-                                           n_warmup_steps=t.pruner.n_warmup_steps),
+        pruner=optuna.pruners.MedianPruner(
+            n_startup_trials=t.pruner.n_startup_trials, n_warmup_steps=t.pruner.n_warmup_steps
+        ),
     )
     done = sum(s.state.is_finished() for s in study.trials)
     remaining = max(0, int(t.n_trials) - done)
     log.info("study %s in %s: %d trials finished, %d to run", t.study_name, t.storage, done, remaining)
-    study.optimize(objective or make_objective(cfg, run_root), n_trials=remaining, catch=(Exception,),
-                   gc_after_trial=True)
+    study.optimize(
+        objective or make_objective(cfg, run_root),
+        n_trials=remaining,
+        catch=(Exception,),
+        gc_after_trial=True,
+    )
     states = {s: sum(tr.state == s for tr in study.trials) for s in optuna.trial.TrialState}
     log.info("trials: %s", {s.name: n for s, n in states.items() if n})
     if any(tr.state == optuna.trial.TrialState.COMPLETE for tr in study.trials):
@@ -81,14 +93,18 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     return study
 
 
-def write_best_experiment(study: optuna.Study, directory: Path, base_overrides: list[str], space: dict) -> Path:
+def write_best_experiment(
+    study: optuna.Study, directory: Path, base_overrides: list[str], space: dict
+) -> Path:
     """``conf/experiment/<study>_best.yaml``: use with ``python train.py experiment=<study>_best``."""
     directory.mkdir(parents=True, exist_ok=True)
     best = study.best_trial
-    lines = ["# @package _global_",
-             f"# best trial {best.number} of Optuna study '{study.study_name}': mean best val/loss "
-             f"{best.value:.6g}",
-             f"# fixed overrides of the study: {base_overrides}"]
+    lines = [
+        "# @package _global_",
+        f"# best trial {best.number} of Optuna study '{study.study_name}': mean best val/loss "
+        f"{best.value:.6g}",
+        f"# fixed overrides of the study: {base_overrides}",
+    ]
     nested: dict = {}
     for name, value in best.params.items():
         node = nested

@@ -4,7 +4,7 @@ Physics kernels (``geometry``, ``lubrication``, ``contacts``, ``assembly``, ``st
 functions over arrays; ``integrator.Simulation`` strings them together; I/O lives in ``rheograph.io``.
 """
 
-from rheograph.sim.params import SimParams
 from rheograph.sim.integrator import Simulation
+from rheograph.sim.params import SimParams
 
 __all__ = ["SimParams", "Simulation"]

@@ -60,8 +60,20 @@ def _add_diag_block(data, indptr, slot, j, R, off):
 
 @njit(cache=True)
 def assemble_resistance(
-    radii, pair_i, pair_j, nvec, dy, coeff, active, in_contact, k_normal, k_tangential,
-    indptr, pair_slot, diag_slot, nnz,
+    radii,
+    pair_i,
+    pair_j,
+    nvec,
+    dy,
+    coeff,
+    active,
+    in_contact,
+    k_normal,
+    k_tangential,
+    indptr,
+    pair_slot,
+    diag_slot,
+    nnz,
 ):
     """Matrix data of R_FU and the unit-shear-rate right-hand side.
 
@@ -126,5 +138,3 @@ def dense_from_upper_csc(data, indices, indptr, ndof):
             if row != col:
                 dense[col, row] += data[k]
     return dense
-
-

@@ -76,7 +76,6 @@ class StepResult:
     stress_solvent: np.ndarray | None = None
     contacts: tuple | None = None  # (pairs (M, 2), state (M,), stretch (M, 2)) at this configuration
 
-
     @property
     def stress(self) -> np.ndarray:
         return self.stress_lubrication + self.stress_contact + self.stress_solvent
@@ -141,7 +140,12 @@ class Simulation:
             n_small, n_large = params.species_counts()
             box = params.box_length()
             pos, radii = random_configuration(
-                n_small, n_large, params.size_ratio, box, params.seed, params.relax_tolerance,
+                n_small,
+                n_large,
+                params.size_ratio,
+                box,
+                params.seed,
+                params.relax_tolerance,
                 params.initial_min_gap,
             )
             state = SimState(positions=pos, radii=radii, lx=box, ly=box)
@@ -231,8 +235,20 @@ class Simulation:
         coeff = lubrication_resistance(radii, s.pair_i, s.pair_j, xi, active, p.delta)
         k_normal, k_tangential = self._implicit_stiffness(in_contact)
         data, rhs_rate = assemble_resistance(
-            radii, s.pair_i, s.pair_j, nvec, dy, coeff, active, in_contact, k_normal, k_tangential,
-            self.indptr, self.pair_slot, self.diag_slot, self.indices.shape[0],
+            radii,
+            s.pair_i,
+            s.pair_j,
+            nvec,
+            dy,
+            coeff,
+            active,
+            in_contact,
+            k_normal,
+            k_tangential,
+            self.indptr,
+            self.pair_slot,
+            self.diag_slot,
+            self.indices.shape[0],
         )
         rhs_const = np.zeros(3 * radii.shape[0])
         f_on_i = contacts.contact_spring_forces(
@@ -250,12 +266,36 @@ class Simulation:
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
         lub0, dash0 = pair_stress_sums(
-            vel_const, 0.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact,
-            k_normal, k_tangential, record,
+            vel_const,
+            0.0,
+            radii,
+            s.pair_i,
+            s.pair_j,
+            nvec,
+            r,
+            dy,
+            coeff,
+            lubricated,
+            in_contact,
+            k_normal,
+            k_tangential,
+            record,
         )
         lub1, dash1 = pair_stress_sums(
-            vel_rate, 1.0, radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact,
-            k_normal, k_tangential, record,
+            vel_rate,
+            1.0,
+            radii,
+            s.pair_i,
+            s.pair_j,
+            nvec,
+            r,
+            dy,
+            coeff,
+            lubricated,
+            in_contact,
+            k_normal,
+            k_tangential,
+            record,
         )
         spring = spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, record)
         f = self.stress_factor

@@ -158,7 +158,10 @@ def pair_block(coeff, nx, ny):
 
 @njit(cache=True)
 def strain_force(coeff, nx, ny, exx, exy, eyy):
-    """Force/torque on (i, j) from the imposed rate of strain E (R_FE : E): [Fx_i, Fy_i, T_i, Fx_j, Fy_j, T_j]."""
+    """Force/torque on (i, j) from the imposed rate of strain E (R_FE : E).
+
+    Returns [Fx_i, Fy_i, T_i, Fx_j, Fy_j, T_j].
+    """
     tx = -ny
     ty = nx
     nen = nx * (exx * nx + exy * ny) + ny * (exy * nx + eyy * ny)

@@ -77,9 +77,7 @@ class SimParams:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(mapping) - names)
         if unknown:
-            raise ParameterError(
-                f"unknown simulation parameter(s) {unknown}; allowed: {sorted(names)}"
-            )
+            raise ParameterError(f"unknown simulation parameter(s) {unknown}; allowed: {sorted(names)}")
         return cls(**{k: mapping[k] for k in mapping})
 
     # ---- validation ----------------------------------------------------------------------------

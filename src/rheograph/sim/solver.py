@@ -38,9 +38,7 @@ class QDLDLSolver(SparseSPDSolver):
         self._matrix = None
 
     def analyze(self, indptr, indices, ndof):
-        self._matrix = sp.csc_matrix(
-            (np.zeros(indices.shape[0]), indices, indptr), shape=(ndof, ndof)
-        )
+        self._matrix = sp.csc_matrix((np.zeros(indices.shape[0]), indices, indptr), shape=(ndof, ndof))
         self._factor = None
 
     def factorize(self, data):

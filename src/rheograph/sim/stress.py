@@ -61,7 +61,19 @@ def _add_lubrication_stresslet(out, coeff, nx, ny, ui, uj, wi, wj, exx, exy, eyy
 
 @njit(cache=True)
 def pair_stress_sums(
-    vel, rate, radii, pair_i, pair_j, nvec, r, dy, coeff, lubricated, in_contact, k_normal, k_tangential,
+    vel,
+    rate,
+    radii,
+    pair_i,
+    pair_j,
+    nvec,
+    r,
+    dy,
+    coeff,
+    lubricated,
+    in_contact,
+    k_normal,
+    k_tangential,
     full,
 ):
     """Sum of pair stresslets (xx, xy, yy) for non-affine velocities ``vel`` (3N) and shear rate ``rate``.
