@@ -99,7 +99,7 @@ def test_equal_sphere_tangential_force_closed_form():
 
 @pytest.mark.parametrize("ai,aj", RADII)
 def test_strain_force_is_the_resistance_to_affine_separation(ai, aj):
-    """Pure extension along n pulls the pair apart: R_FE : E is along +n on i and -n on j, equal and opposite."""
+    """Extension along n pulls the pair apart: R_FE : E is +n on i and -n on j, equal and opposite."""
     coeff, _, _ = coefficients(ai, aj, 0.01)
     nx, ny = 1.0, 0.0
     g = strain_force(coeff, nx, ny, 1.0, 0.0, -1.0)  # E = diag(1, -1): n.E.n = 1
