@@ -15,7 +15,7 @@ def steady_state_summary(
     strain_min: float,
     n_blocks: int = 5,
 ) -> dict:
-    """Means over the rows with strain >= strain_min of a strain-sampled time series.
+    """Strain-weighted means over the rows with strain >= strain_min of a time series.
 
     eta_r = sigma * (time elapsed) / (strain accumulated): the time average of the shear rate gives the
     steady viscosity (equal to the strain-weighted mean of the instantaneous sigma/shear_rate).
@@ -38,10 +38,16 @@ def steady_state_summary(
 
     out["viscosity"] = float(stress * (t[-1] - t[0]) / (s[-1] - s[0]))
     out["viscosity_se"] = float(np.std([eta(b) for b in blocks], ddof=1) / np.sqrt(n_blocks))
+    # strain weights: each row stands for the strain to the next row, so rows written while the flow
+    # stalled (time-triggered, see rheograph.runner) do not outweigh the strain-sampled ones
+    w = np.clip(np.diff(s, append=s[-1] + np.median(np.diff(s))), 0.0, None)
+    if w.sum() <= 0:
+        w = np.ones_like(s)
     for name, series in (("pressure", pressure), ("z_mu", z_mu), ("z", z)):
         x = series[keep]
-        out[name] = float(x.mean())
-        out[name + "_se"] = float(np.std([x[b].mean() for b in blocks], ddof=1) / np.sqrt(n_blocks))
+        out[name] = float(np.average(x, weights=w))
+        block_means = [np.average(x[b], weights=w[b]) if w[b].sum() > 0 else x[b].mean() for b in blocks]
+        out[name + "_se"] = float(np.std(block_means, ddof=1) / np.sqrt(n_blocks))
     out["n_rows"] = int(keep.sum())
     return out
 

@@ -79,151 +79,176 @@ def run_state_point(
         sim = Simulation(params, solver=solver)
         traj.open_new(sim.state)
         counters = {}
-    s = sim.state
-    n = s.radii.shape[0]
-    oi = params.output_interval
-    next_output = counters.get("next_output", 0.0)
-    next_snapshot = counters.get("next_snapshot", 0.0)
-    last_row_time = counters.get("last_row_time", -math.inf)
-    last_row_strain = counters.get("last_row_strain", 0.0)
-    jam_run = counters.get("jam_run", 0)
-    stall_time = oi * params.jam_viscosity / params.stress
-    status = "running"
-    start = wallclock.time()
-    last_checkpoint = start
-    steps_here = 0
+    loop = _RunLoop(params, sim, traj, counters, progress, max_steps)
+    try:
+        with _StopFlag() as stop:
+            try:
+                status = loop.run(stop)
+            except Exception:
+                traj.finish("error", {})  # an exception (e.g. a solver failure) is recorded, then raised
+                raise
+            if status != "diverged":  # never overwrite the last good checkpoint with a diverged state
+                loop.save()
+            summary = _summary(traj, params, status, sim.state.strain)
+            traj.finish(status, summary if status in ("completed", "jammed", "diverged") else {})
+    finally:
+        loop.bar.close()
+        traj.close()
+    return RunOutcome(status, sim.state.strain, sim.state.steps, wallclock.time() - loop.start, summary)
 
-    def save():
-        traj.write_checkpoint(
-            s,
+
+class _RunLoop:
+    """Output cadence, snapshots, jam window and checkpoints around ``Simulation.step``."""
+
+    def __init__(self, params, sim, traj, counters, progress, max_steps):
+        self.params, self.sim, self.traj, self.max_steps = params, sim, traj, max_steps
+        self.next_output = counters.get("next_output", 0.0)
+        self.next_snapshot = counters.get("next_snapshot", 0.0)
+        self.last_row_time = counters.get("last_row_time", -math.inf)
+        self.last_row_strain = counters.get("last_row_strain", 0.0)
+        # (dt, d strain) of the last jam_intervals rows: the flow counts as stalled when, over this whole
+        # window, the apparent viscosity exceeds jam_viscosity (a window, so that intermittent creep near
+        # DST cannot reset the detector with a single flowing interval)
+        self.jam_window = [tuple(w) for w in counters.get("jam_window", [])]
+        self.stall_time = params.output_interval * params.jam_viscosity / params.stress
+        self.start = wallclock.time()
+        self.bar = tqdm(
+            total=params.strain,
+            initial=round(sim.state.strain, 4),
+            unit="strain",
+            disable=not progress,
+            mininterval=1.0,
+            bar_format="{l_bar}{bar}| {n:.3f}/{total:.3g} [{elapsed}<{remaining}{postfix}]",
+        )
+
+    def save(self):
+        self.traj.write_checkpoint(
+            self.sim.state,
             dict(
-                next_output=next_output,
-                next_snapshot=next_snapshot,
-                last_row_time=last_row_time,
-                last_row_strain=last_row_strain,
-                jam_run=jam_run,
+                next_output=self.next_output,
+                next_snapshot=self.next_snapshot,
+                last_row_time=self.last_row_time,
+                last_row_strain=self.last_row_strain,
+                jam_window=self.jam_window,
             ),
         )
 
-    bar = tqdm(
-        total=params.strain,
-        initial=round(s.strain, 4),
-        unit="strain",
-        disable=not progress,
-        mininterval=1.0,
-        bar_format="{l_bar}{bar}| {n:.3f}/{total:.3g} [{elapsed}<{remaining}{postfix}]",
-    )
-    try:
-        with _StopFlag() as stop:
-            while True:
-                if s.strain >= params.strain:
-                    status = "completed"
-                    break
-                if jam_run >= params.jam_intervals:
-                    status = "jammed"
-                    break
-                if stop.stop:
-                    status = "interrupted"
-                    break
-                if max_steps is not None and steps_here >= max_steps:
-                    status = "interrupted"
-                    break
-                now = wallclock.time()
-                if params.max_wall_seconds and now - start >= params.max_wall_seconds:
-                    status = "wall_limit"
-                    break
-                if now - last_checkpoint >= params.checkpoint_wall_seconds:
-                    save()
-                    last_checkpoint = now
-                row_due = s.strain >= next_output or s.time - last_row_time >= stall_time
-                snap_due = s.strain >= next_snapshot
-                if snap_due:
-                    snap_positions = s.positions.copy()
-                    snap_time, snap_strain, snap_offset = s.time, s.strain, s.le_offset
-                row_time, row_strain = s.time, s.strain
-                result = sim.step(record=row_due or snap_due)
-                steps_here += 1
-                if not (math.isfinite(result.shear_rate) and np.isfinite(s.positions).all()):
-                    status = "diverged"
-                    break
-                if row_due or snap_due:
-                    eta = viscosity(result)
-                    pressure = particle_pressure(result)
-                    z_mu = 2.0 * result.n_frictional / n
-                    z = 2.0 * result.n_contacts / n
-                if row_due:
-                    d_strain = row_strain - last_row_strain
-                    jammed = last_row_time > -math.inf and (
-                        d_strain <= 0.0
-                        or params.stress * (row_time - last_row_time) / d_strain > params.jam_viscosity
-                    )
-                    jam_run = jam_run + 1 if jammed else 0
-                    traj.append_row(
-                        dict(
-                            time=row_time,
-                            strain=row_strain,
-                            shear_rate=result.shear_rate,
-                            viscosity=eta,
-                            pressure=pressure,
-                            z_mu=z_mu,
-                            z=z,
-                            max_overlap=result.max_overlap,
-                            max_stretch=result.max_stretch,
-                            dt=result.dt,
-                            steps=s.steps - 1,
-                            jammed=jammed,
-                            stress=result.stress,
-                            stress_lubrication=result.stress_lubrication,
-                            stress_contact=result.stress_contact,
-                            stress_solvent=result.stress_solvent,
-                        )
-                    )
-                    last_row_time, last_row_strain = row_time, row_strain
-                    if row_strain >= next_output:
-                        next_output = (math.floor(row_strain / oi + 1e-9) + 1) * oi
-                    bar.set_postfix_str(
-                        f"rate={result.shear_rate:.3g} eta_r={eta:.3g} Zmu={z_mu:.2f}", refresh=False
-                    )
-                    bar.update(min(round(s.strain, 4), params.strain) - bar.n)
-                if snap_due:
-                    pairs, states, stretch = result.contacts
-                    traj.append_snapshot(
-                        dict(
-                            time=snap_time,
-                            strain=snap_strain,
-                            le_offset=snap_offset,
-                            shear_rate=result.shear_rate,
-                            viscosity=eta,
-                            pressure=pressure,
-                            z_mu=z_mu,
-                            z=z,
-                            positions=snap_positions,
-                            contact_pairs=pairs,
-                            contact_state=states,
-                            contact_stretch=stretch,
-                        )
-                    )
-                    next_snapshot = (math.floor(snap_strain / params.snapshot_interval + 1e-9) + 1) * (
-                        params.snapshot_interval
-                    )
-        save()
-        ts = {name: traj.h5["timeseries"][name][()] for name in traj.h5["timeseries"]}
-        summary = steady_state_summary(
-            ts["strain"],
-            ts["time"],
-            ts["pressure"],
-            ts["z_mu"],
-            ts["z"],
-            params.stress,
-            params.steady_state_strain,
+    def stalled(self) -> bool:
+        if len(self.jam_window) < self.params.jam_intervals:
+            return False
+        total_time = sum(w[0] for w in self.jam_window)
+        total_strain = sum(w[1] for w in self.jam_window)
+        return (
+            total_strain <= 0.0 or self.params.stress * total_time / total_strain > self.params.jam_viscosity
         )
-        summary["max_overlap"] = float(ts["max_overlap"].max()) if ts["max_overlap"].size else 0.0
-        summary["jammed_fraction"] = float(ts["jammed"].mean()) if ts["jammed"].size else 0.0
-        if status in ("completed", "jammed", "diverged"):
-            traj.finish(status, summary)
-        else:
-            traj.finish(status, {})
-    finally:
-        bar.close()
-        traj.close()
-    return RunOutcome(status, s.strain, s.steps, wallclock.time() - start, summary)
+
+    def run(self, stop) -> str:
+        p, s, sim = self.params, self.sim.state, self.sim
+        last_checkpoint = self.start
+        steps_here = 0
+        while True:
+            if s.strain >= p.strain:
+                return "completed"
+            if self.stalled():
+                return "jammed"
+            if stop.stop or (self.max_steps is not None and steps_here >= self.max_steps):
+                return "interrupted"
+            now = wallclock.time()
+            if p.max_wall_seconds and now - self.start >= p.max_wall_seconds:
+                return "wall_limit"
+            if now - last_checkpoint >= p.checkpoint_wall_seconds:
+                self.save()
+                last_checkpoint = now
+            row_due = s.strain >= self.next_output or s.time - self.last_row_time >= self.stall_time
+            snap_due = s.strain >= self.next_snapshot
+            before = (s.time, s.strain, s.le_offset, s.positions.copy() if snap_due else None)
+            result = sim.step(record=row_due or snap_due)
+            steps_here += 1
+            if not (math.isfinite(result.shear_rate) and np.isfinite(s.positions).all()):
+                return "diverged"
+            if row_due:
+                self._row(result, before)
+            if snap_due:
+                self._snapshot(result, before)
+
+    def _observables(self, result):
+        n = self.sim.state.radii.shape[0]
+        return dict(
+            shear_rate=result.shear_rate,
+            viscosity=viscosity(result),
+            pressure=particle_pressure(result),
+            z_mu=2.0 * result.n_frictional / n,
+            z=2.0 * result.n_contacts / n,
+        )
+
+    def _row(self, result, before):
+        p = self.params
+        row_time, row_strain = before[0], before[1]
+        d_strain = row_strain - self.last_row_strain
+        jammed = False
+        if self.last_row_time > -math.inf:
+            d_time = row_time - self.last_row_time
+            jammed = d_strain <= 0.0 or p.stress * d_time / d_strain > p.jam_viscosity
+            self.jam_window = (self.jam_window + [(d_time, d_strain)])[-p.jam_intervals :]
+        obs = self._observables(result)
+        self.traj.append_row(
+            dict(
+                time=row_time,
+                strain=row_strain,
+                **obs,
+                max_overlap=result.max_overlap,
+                max_stretch=result.max_stretch,
+                dt=result.dt,
+                steps=self.sim.state.steps - 1,
+                jammed=jammed,
+                stress=result.stress,
+                stress_lubrication=result.stress_lubrication,
+                stress_contact=result.stress_contact,
+                stress_solvent=result.stress_solvent,
+            )
+        )
+        self.last_row_time, self.last_row_strain = row_time, row_strain
+        if row_strain >= self.next_output:
+            oi = p.output_interval
+            self.next_output = (math.floor(row_strain / oi + 1e-9) + 1) * oi
+        self.bar.set_postfix_str(
+            f"rate={obs['shear_rate']:.3g} eta_r={obs['viscosity']:.3g} Zmu={obs['z_mu']:.2f}", refresh=False
+        )
+        self.bar.update(min(round(self.sim.state.strain, 4), p.strain) - self.bar.n)
+
+    def _snapshot(self, result, before):
+        snap_time, snap_strain, snap_offset, positions = before
+        pairs, states, stretch = result.contacts
+        self.traj.append_snapshot(
+            dict(
+                time=snap_time,
+                strain=snap_strain,
+                le_offset=snap_offset,
+                **self._observables(result),
+                positions=positions,
+                contact_pairs=pairs,
+                contact_state=states,
+                contact_stretch=stretch,
+            )
+        )
+        interval = self.params.snapshot_interval
+        self.next_snapshot = (math.floor(snap_strain / interval + 1e-9) + 1) * interval
+
+
+def _summary(traj, params: SimParams, status: str, strain: float) -> dict:
+    ts = {name: traj.h5["timeseries"][name][()] for name in traj.h5["timeseries"]}
+    summary = steady_state_summary(
+        ts["strain"],
+        ts["time"],
+        ts["pressure"],
+        ts["z_mu"],
+        ts["z"],
+        params.stress,
+        params.steady_state_strain,
+    )
+    summary["max_overlap"] = float(ts["max_overlap"].max()) if ts["max_overlap"].size else 0.0
+    summary["jammed_fraction"] = float(ts["jammed"].mean()) if ts["jammed"].size else 0.0
+    if status == "jammed":  # the apparent viscosity diverges: recorded as such, never averaged
+        summary["viscosity"], summary["viscosity_se"] = math.inf, math.nan
+        summary["jammed_at_strain"] = float(strain)
+    return summary

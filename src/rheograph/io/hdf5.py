@@ -103,20 +103,31 @@ class TrajectoryFile:
             sn.create_dataset(
                 "contact_stretch", shape=(0, 2), maxshape=(None, 2), dtype=np.float64, chunks=(1024, 2)
             )
-            h5.create_group("checkpoint")
-        tmp.replace(self.path)  # the file appears only once it is a valid, empty trajectory
-        self.h5 = h5py.File(self.path, "r+")
+        self.h5 = h5py.File(tmp, "r+")
         self.write_checkpoint(state, {})
+        self.h5.close()
+        tmp.replace(self.path)  # the file appears only once it is a valid trajectory with a checkpoint
+        self.h5 = h5py.File(self.path, "r+")
 
     def open_existing(self) -> tuple[SimState, dict]:
         """Open for resuming; verify the file and return (state, runner counters) from the checkpoint."""
         try:
             h5 = h5py.File(self.path, "r+")
         except OSError as exc:
+            if "lock" in str(exc).lower():
+                raise TrajectoryFileError(
+                    f"{self.path} is open in another process (HDF5 file lock): is this state point "
+                    "already running?"
+                ) from exc
             raise TrajectoryFileError(f"{self.path}: not a readable HDF5 file ({exc}); move it away") from exc
-        if h5.attrs.get("producer") != PRODUCER or "checkpoint" not in h5:
+        if h5.attrs.get("producer") != PRODUCER:
             h5.close()
             raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
+        if "checkpoint" not in h5 and "checkpoint_new" in h5:  # interrupted between delete and move
+            h5.move("checkpoint_new", "checkpoint")
+        if "checkpoint" not in h5:
+            h5.close()
+            raise TrajectoryFileError(f"{self.path}: the checkpoint is missing; move the file away")
         version = int(h5.attrs.get("schema_version", -1))
         if version != SCHEMA_VERSION:
             h5.close()
@@ -151,6 +162,9 @@ class TrajectoryFile:
         for name in ("contact_pairs", "contact_state", "contact_stretch"):
             sn[name].resize(n_contacts, axis=0)
         h5.attrs["status"] = "running"
+        h5.attrs["params"] = json.dumps(mine)  # resumable parameters (strain, wall limits) may have changed
+        for key, value in mine.items():
+            h5.attrs[f"param_{key}"] = value
         self.h5 = h5
         return state, counters
 
@@ -178,14 +192,20 @@ class TrajectoryFile:
             "snapshots": self.h5["snapshots"]["time"].shape[0],
             **{k: v for k, v in counters.items() if k not in ("rows", "snapshots")},
         }
-        cp = self.h5["checkpoint"]
+        # write a complete new group, then swap it in: an interruption leaves the old or the new
+        # checkpoint, never a mixture
+        if "checkpoint_new" in self.h5:
+            del self.h5["checkpoint_new"]
+        cp = self.h5.create_group("checkpoint_new")
         for name in SimState.ARRAYS:
-            if name in cp:
-                del cp[name]
             cp.create_dataset(name, data=getattr(state, name))
         for name in SimState.SCALARS:
             cp.attrs[name] = getattr(state, name)
         cp.attrs["counters"] = json.dumps(counters)
+        self.h5.flush()
+        if "checkpoint" in self.h5:
+            del self.h5["checkpoint"]
+        self.h5.move("checkpoint_new", "checkpoint")
         self.h5.flush()
 
     def finish(self, status: str, summary: dict) -> None:

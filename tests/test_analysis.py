@@ -1,0 +1,48 @@
+"""Steady-state estimator: exact on synthetic series, and equal to LF_DEM's published summary."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rheograph.analysis import read_lfdem_data, steady_state_summary
+
+REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "lfdem_phi0.76"
+
+
+def test_viscosity_is_stress_over_time_averaged_shear_rate():
+    # shear rate alternating 1 and 3 in equal time: mean rate 2 -> eta = sigma / 2
+    t = np.linspace(0, 10, 1001)
+    rate = np.where((t * 10).astype(int) % 2 == 0, 1.0, 3.0)
+    strain = np.concatenate([[0], np.cumsum(rate[:-1] * np.diff(t))])
+    ones = np.ones_like(t)
+    out = steady_state_summary(strain, t, ones, ones, ones, stress=4.0, strain_min=0.0)
+    assert out["viscosity"] == pytest.approx(2.0, rel=1e-2)
+
+
+def test_stalled_rows_do_not_outweigh_strain_sampled_rows():
+    strain = np.array([0.0, 0.01, 0.02, 0.02, 0.02, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08])
+    time = np.arange(strain.size, dtype=float)
+    pressure = np.where(np.diff(strain, append=0.09) == 0, 100.0, 1.0)
+    ones = np.ones_like(strain)
+    out = steady_state_summary(strain, time, pressure, ones, ones, 1.0, 0.0, n_blocks=2)
+    assert out["pressure"] == pytest.approx(1.0)
+
+
+def test_too_short_window_gives_nan_not_a_number_made_up():
+    s = np.linspace(0, 0.05, 6)
+    out = steady_state_summary(s, s, s, s, s, 1.0, strain_min=1.0)
+    assert np.isnan(out["viscosity"]) and out["n_rows"] == 0
+
+
+@pytest.mark.skipif(not REFERENCE.exists(), reason="shared reference data not present")
+@pytest.mark.parametrize(
+    "name,eta,se",
+    [("data_N400_phi0.76_s0.5_disp1e-3.dat", 45.3, 1.2), ("data_N400_phi0.76_s10_disp1e-3.dat", 155, 11)],
+)
+def test_estimator_reproduces_the_reference_summary(name, eta, se):
+    """Applied to LF_DEM's own time series, our estimator gives the reference README's eta_r."""
+    d = read_lfdem_data(REFERENCE / name)
+    stress = float(name.split("_s")[1].split("_")[0])
+    out = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, 1.0)
+    assert out["viscosity"] == pytest.approx(eta, abs=se / 2)
