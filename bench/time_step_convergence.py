@@ -77,8 +77,7 @@ def collect() -> list[dict]:
                 seed=p["seed"],
                 s_per_strain=cost["wall"] / cost["strain"],
                 steps_per_strain=cost["steps"] / cost["strain"],
-                max_overlap=float(ts["max_overlap"].max()),
-                **info["summary"],
+                **{**info["summary"], "max_overlap": float(ts["max_overlap"].max())},
             )
         )
     return rows
@@ -86,6 +85,7 @@ def collect() -> list[dict]:
 
 def plot(args) -> None:
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -122,6 +122,8 @@ def plot(args) -> None:
                 )
         for ax, label in zip(row_axes, ("η_r", "Π/σ", "Z_μ")):
             ax.set_xscale("log")
+            ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             ax.set_xlabel("wall seconds per unit strain (N = 400, 1 thread)")
             ax.set_ylabel(label)
             ax.set_title(f"φ = {args.phi}, σ/σ0 = {stress:g}")

@@ -51,7 +51,6 @@ def collect(directories) -> list[dict]:
             stress=stress,
             disp_max=disp,
             integrator=integrator,
-            n_seeds=len(infos),
             statuses=sorted({i["status"] for i in infos}),
             strain=float(np.mean([i["strain"] for i in infos])),
         )
@@ -61,6 +60,9 @@ def collect(directories) -> list[dict]:
             if i["status"] == "completed" and np.isfinite(i["summary"].get("viscosity", np.nan))
         ]
         point["jammed"] = any(i["status"] == "jammed" for i in infos)
+        point["n_seeds"] = len(
+            flowing
+        )  # seeds that enter the averages (unfinished runs are listed, not used)
         for k in KEYS:
             vals = np.array([i["summary"][k] for i in flowing])
             ses = np.array([i["summary"][k + "_se"] for i in flowing])
