@@ -176,3 +176,32 @@ def test_flowing_state_is_not_flagged_jammed(tmp_path):
     out = run_state_point(SimParams(**TINY), tmp_path / "flow.h5", progress=False)
     assert out.status == "completed"
     assert not read_timeseries(tmp_path / "flow.h5")["jammed"].any()
+
+
+def test_sigterm_checkpoints_then_exits_and_the_run_resumes(tmp_path):
+    """A SIGTERM (e.g. SLURM pre-emption) mid-run: checkpoint, clean close, non-zero exit; resume later."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "run.h5"
+    code = (
+        "from rheograph.runner import run_state_point\n"
+        "from rheograph.sim.params import SimParams\n"
+        f"run_state_point(SimParams(n_particles=64, phi=0.74, stress=5.0, strain=50.0), {str(path)!r},"
+        " progress=False)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    deadline = time.time() + 120
+    while time.time() < deadline and not path.exists():
+        time.sleep(0.2)
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 128 + signal.SIGTERM
+    info = read_run_info(path)
+    assert info["status"] == "interrupted" and info["strain"] > 0
+    out = run_state_point(
+        SimParams(n_particles=64, phi=0.74, stress=5.0, strain=info["strain"] + 0.01), path, progress=False
+    )
+    assert out.status == "completed"

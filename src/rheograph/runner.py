@@ -34,10 +34,12 @@ class RunOutcome:
 
 
 class _StopFlag:
-    """SIGINT/SIGTERM set a flag; the loop checkpoints and returns (a second SIGINT aborts)."""
+    """SIGINT/SIGTERM set a flag; the loop checkpoints, the file is closed, then the signal's usual
+    effect (KeyboardInterrupt / exit) follows.  A second SIGINT aborts at once."""
 
     def __init__(self):
         self.stop = False
+        self.signum = None
         self._old = {}
 
     def __enter__(self):
@@ -52,6 +54,7 @@ class _StopFlag:
         if self.stop and signum == signal.SIGINT:
             raise KeyboardInterrupt
         self.stop = True
+        self.signum = signum
 
     def __exit__(self, *exc):
         for sig, old in self._old.items():
@@ -94,6 +97,9 @@ def run_state_point(
     finally:
         loop.bar.close()
         traj.close()
+    if stop.signum is not None:
+        # the file is checkpointed and closed; now stop the whole process (and a Hydra sweep with it)
+        raise KeyboardInterrupt if stop.signum == signal.SIGINT else SystemExit(128 + stop.signum)
     return RunOutcome(status, sim.state.strain, sim.state.steps, wallclock.time() - loop.start, summary)
 
 
