@@ -272,38 +272,9 @@ class Simulation:
         timings["solve"] += t4 - t3
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
-        lub0, dash0 = pair_stress_sums(
-            vel_const,
-            0.0,
-            radii,
-            s.pair_i,
-            s.pair_j,
-            nvec,
-            r,
-            dy,
-            coeff,
-            lubricated,
-            in_contact,
-            k_normal,
-            k_tangential,
-            record,
-        )
-        lub1, dash1 = pair_stress_sums(
-            vel_rate,
-            1.0,
-            radii,
-            s.pair_i,
-            s.pair_j,
-            nvec,
-            r,
-            dy,
-            coeff,
-            lubricated,
-            in_contact,
-            k_normal,
-            k_tangential,
-            record,
-        )
+        geometry = (radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact)
+        lub0, dash0 = pair_stress_sums(vel_const, 0.0, *geometry, k_normal, k_tangential, record)
+        lub1, dash1 = pair_stress_sums(vel_rate, 1.0, *geometry, k_normal, k_tangential, record)
         spring = spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, record)
         f = self.stress_factor
         solvent_unit = np.array([0.0, 1.0, 0.0])  # 2 eta0 E at unit rate, in sigma0
