@@ -3,9 +3,10 @@ LF_DEM reference data.
 
     python -m rheograph.flowcurve data/flow_curves --out docs --reference ../shared/reference/lfdem_phi0.76
 
-writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled:
-the value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the
-propagated block standard errors.  Shear-jammed runs are listed as such and never averaged.
+writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled: the
+value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the propagated
+block standard errors.  Runs stopped early (wall-clock limit) are included and flagged by their status and
+reached strain; shear-jammed runs are listed as such and never averaged.
 """
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ from rheograph.analysis import read_lfdem_data, steady_state_summary
 from rheograph.io.hdf5 import read_run_info
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")
+# runs whose steady-state window is averaged: finished ones, and runs stopped early (wall-clock limit or
+# interruption), which the table flags through their status and reached strain
+PARTIAL_OR_DONE = ("completed", "wall_limit", "interrupted")
 
 
 def _is_trajectory(path: Path) -> bool:
@@ -57,7 +61,7 @@ def collect(directories) -> list[dict]:
         flowing = [
             i
             for i in infos
-            if i["status"] == "completed" and np.isfinite(i["summary"].get("viscosity", np.nan))
+            if i["status"] in PARTIAL_OR_DONE and np.isfinite(i["summary"].get("viscosity", np.nan))
         ]
         point["jammed"] = any(i["status"] == "jammed" for i in infos)
         point["n_seeds"] = len(

@@ -93,7 +93,7 @@ def run_state_point(
             if status != "diverged":  # never overwrite the last good checkpoint with a diverged state
                 loop.save()
             summary = _summary(traj, params, status, sim.state.strain)
-            traj.finish(status, summary if status in ("completed", "jammed", "diverged") else {})
+            traj.finish(status, summary)  # partial runs get a summary too; their status says so
     finally:
         loop.bar.close()
         traj.close()
