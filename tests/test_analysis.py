@@ -46,3 +46,16 @@ def test_estimator_reproduces_the_reference_summary(name, eta, se):
     stress = float(name.split("_s")[1].split("_")[0])
     out = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, 1.0)
     assert out["viscosity"] == pytest.approx(eta, abs=se / 2)
+
+
+def test_flow_curve_report_pools_seeds_and_flags_states(tiny_files, tmp_path):
+    from rheograph.flowcurve import main
+
+    main([str(Path(tiny_files[0]).parent), "--out", str(tmp_path)])
+    table = (tmp_path / "flow_curves.md").read_text()
+    assert (tmp_path / "flow_curves.png").stat().st_size > 10_000
+    rows = [line for line in table.splitlines() if line.startswith("| 64 |")]
+    assert len(rows) == 3 and all(r.rstrip().endswith("completed |") for r in rows)
+    # eta_r grows with stress (shear thickening) in the tiny runs too
+    etas = [float(r.split("|")[8].split("±")[0]) for r in rows]
+    assert etas == sorted(etas)

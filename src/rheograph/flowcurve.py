@@ -20,7 +20,7 @@ import h5py
 import numpy as np
 
 from rheograph.analysis import read_lfdem_data, steady_state_summary
-from rheograph.io.hdf5 import read_run_info
+from rheograph.io.hdf5 import read_run_info, read_timeseries
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")
 # runs whose steady-state window is averaged: finished ones, and runs stopped early (wall-clock limit or
@@ -45,6 +45,17 @@ def collect(directories) -> list[dict]:
                 continue
             info = read_run_info(path)
             p = info["params"]
+            # recompute from the time series (the estimator may be newer than the file's summary)
+            ts = read_timeseries(path)
+            info["summary"] = steady_state_summary(
+                ts["strain"],
+                ts["time"],
+                ts["pressure"],
+                ts["z_mu"],
+                ts["z"],
+                p["stress"],
+                p["steady_state_strain"],
+            )
             key = (p["n_particles"], p["phi"], p["stress"], p["disp_max"], p["integrator"])
             groups[key].append(info)
     points = []
