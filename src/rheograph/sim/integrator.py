@@ -69,8 +69,8 @@ class StepResult:
     shear_rate: float
     n_contacts: int
     n_frictional: int
-    max_overlap: float
-    max_stretch: float
+    max_overlap: float = 0.0  # [a], set on recorded steps
+    max_stretch: float = 0.0  # [a], set on recorded steps
     stress_lubrication: np.ndarray | None = None
     stress_contact: np.ndarray | None = None
     stress_solvent: np.ndarray | None = None
@@ -305,12 +305,11 @@ class Simulation:
             shear_rate=shear_rate,
             n_contacts=int(in_contact.sum()),
             n_frictional=n_frictional,
-            max_overlap=float(max(0.0, -(xi * 0.5 * (radii[s.pair_i] + radii[s.pair_j])).min()))
-            if xi.shape[0]
-            else 0.0,
-            max_stretch=float(np.sqrt((s.stretch**2).sum(axis=1)).max()) if xi.shape[0] else 0.0,
         )
         if record:
+            if xi.shape[0]:  # monitoring only: computed where it is recorded
+                result.max_overlap = float(max(0.0, -(xi * 0.5 * (radii[s.pair_i] + radii[s.pair_j])).min()))
+                result.max_stretch = float(np.sqrt((s.stretch**2).sum(axis=1)).max())
             touching = s.contact_state != contacts.NONE
             result.contacts = (
                 np.stack([s.pair_i[touching], s.pair_j[touching]], axis=1),
