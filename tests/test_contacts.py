@@ -88,3 +88,28 @@ def test_stretch_increment_uses_total_relative_surface_velocity():
     # affine: relative translation shear*dy along x, both rotate at -shear/2
     vt = (shear * 2.4) * -1.0 - (RADII[0] * -0.25 + RADII[1] * -0.25)
     np.testing.assert_allclose([sx, sy], [vt * -1.0, 0.0])
+
+
+def test_max_interaction_speed_matches_brute_force():
+    """dt limiter: max over active pairs of |n.(U_j - U_i)| (affine included) and contact sliding speed."""
+    rng = np.random.default_rng(5)
+    radii = np.array([1.0, 1.4, 1.0, 1.4])
+    pi, pj = np.array([0, 0, 1]), np.array([1, 2, 3])
+    theta = rng.random(3) * 2 * np.pi
+    nvec = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    dy = np.array([2.0, -1.5, 0.7])
+    vel = rng.normal(size=12)
+    active = np.array([True, True, False])
+    state = np.array([STICK, NONE, STICK], dtype=np.int8)  # pair 2 inactive: ignored entirely
+    shear = 0.8
+    expected = 0.0
+    for p in range(2):
+        i, j = pi[p], pj[p]
+        du = vel[3 * j : 3 * j + 2] - vel[3 * i : 3 * i + 2] + np.array([shear * dy[p], 0.0])
+        expected = max(expected, abs(du @ nvec[p]))
+        if state[p] != NONE:
+            t = np.array([-nvec[p, 1], nvec[p, 0]])
+            w = radii[i] * (vel[3 * i + 2] - shear / 2) + radii[j] * (vel[3 * j + 2] - shear / 2)
+            expected = max(expected, abs(du @ t - w))
+    got = contacts.max_interaction_speed(vel, radii, pi, pj, nvec, dy, active, state, shear)
+    assert got == pytest.approx(expected, rel=1e-12)
