@@ -1,9 +1,16 @@
 """Simulate one state point (or a grid with -m).  See README.md and conf/simulate.yaml."""
 
-import hydra
-from omegaconf import DictConfig
+import os
 
-from rheograph.cli import register_resolvers, simulate_main
+# one thread per simulation (state points run in parallel, not the linear algebra inside one): CHOLMOD's
+# OpenMP only honours OMP_THREAD_LIMIT, read when libgomp loads, i.e. before the imports below
+os.environ.setdefault("OMP_THREAD_LIMIT", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import hydra  # noqa: E402
+from omegaconf import DictConfig  # noqa: E402
+
+from rheograph.cli import register_resolvers, simulate_main  # noqa: E402
 
 register_resolvers()
 

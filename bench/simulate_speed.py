@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
 
@@ -28,8 +29,11 @@ PHASES = ("neighbours", "assembly", "factorisation", "solve", "stress", "update"
 LFDEM_CPU_PER_STRAIN = {(400, 2e-3): "~100", (400, 1e-3): "~130–180", (2000, 2e-3): "~490"}
 
 
-def measure(n, disp, integrator, warmup, window, windows):
-    sim = Simulation(SimParams(n_particles=n, phi=0.76, stress=10.0, disp_max=disp, integrator=integrator))
+def measure(n, disp, integrator, solver, skin, warmup, window, windows):
+    params = SimParams(
+        n_particles=n, phi=0.76, stress=10.0, disp_max=disp, integrator=integrator, neighbour_skin=skin
+    )
+    sim = Simulation(params, solver=solver)
     while sim.state.strain < warmup:
         sim.step()
     results = []
@@ -59,36 +63,46 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[400, 1000, 2000])
     ap.add_argument("--disp", type=float, nargs="+", default=[2e-3, 1e-3])
     ap.add_argument("--integrators", nargs="+", default=["euler", "implicit"])
+    ap.add_argument("--solvers", nargs="+", default=["cholmod", "qdldl"])
+    ap.add_argument("--skins", type=float, nargs="+", default=[SimParams.neighbour_skin])
     ap.add_argument("--warmup", type=float, default=0.3, help="strain before timing")
     ap.add_argument("--windows", type=int, default=3)
     ap.add_argument("--particle-steps", type=float, default=3e6, help="work per timing window")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     lines = [
-        f"Machine: {os.cpu_count()} cores, single-threaded simulator (OPENBLAS_NUM_THREADS=1); "
+        f"Machine: {os.cpu_count()} cores, single-threaded simulator "
+        "(OPENBLAS_NUM_THREADS=OMP_THREAD_LIMIT=1); "
         f"φ = 0.76, σ/σ0 = 10; medians of {args.windows} windows after {args.warmup} strain of warm-up.",
         "",
-        "| N | disp_max | integrator | wall s/strain | CPU s/strain | LF_DEM CPU s/strain | steps/strain | "
-        "ms/step | µs/particle-step | neighbours | assembly | factorise | solve | stress | update |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| N | disp_max | integrator | solver | skin | wall s/strain | CPU s/strain | LF_DEM CPU s/strain "
+        "| steps/strain | ms/step | µs/particle-step "
+        "| neighbours | assembly | factorise | solve | stress | update |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for integrator in args.integrators:
-        for disp in args.disp:
-            for n in args.n:
-                # strain window holding about --particle-steps particle-steps (~15 steps per 1e-3 strain)
-                window = max(0.01, args.particle_steps / (n * 15.0 / disp * 1e-3) * 1e-3)
-                r = measure(n, disp, integrator, args.warmup, window, args.windows)
-                ref = LFDEM_CPU_PER_STRAIN.get((n, disp), "–") if integrator == "euler" else "–"
-                line = (
-                    f"| {n} | {disp:g} | {integrator} | {r['wall_per_strain']:.1f} | "
-                    f"{r['cpu_per_strain']:.1f} | "
-                    f"{ref} | {r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
-                    f"{r['us_per_particle_step']:.2f} | "
-                    + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES)
-                    + " |"
-                )
-                print(line, flush=True)
-                lines.append(line)
+    cases = [
+        (integrator, disp, n, solver, skin)
+        for integrator in args.integrators
+        for disp in args.disp
+        for n in args.n
+        for solver in args.solvers
+        for skin in args.skins
+    ]
+    for integrator, disp, n, solver, skin in cases:
+        # strain window holding about --particle-steps particle-steps (~15 steps per 1e-3 strain)
+        window = max(0.01, args.particle_steps / (n * 15.0 / disp * 1e-3) * 1e-3)
+        r = measure(n, disp, integrator, solver, skin, args.warmup, window, args.windows)
+        ref = LFDEM_CPU_PER_STRAIN.get((n, disp), "–") if integrator == "euler" else "–"
+        line = (
+            f"| {n} | {disp:g} | {integrator} | {solver} | {skin:g} | {r['wall_per_strain']:.1f} | "
+            f"{r['cpu_per_strain']:.1f} | "
+            f"{ref} | {r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
+            f"{r['us_per_particle_step']:.2f} | "
+            + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES)
+            + " |"
+        )
+        print(line, flush=True)
+        lines.append(line)
     lines += [
         "",
         "Command: `python bench/simulate_speed.py "

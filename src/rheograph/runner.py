@@ -65,7 +65,7 @@ def run_state_point(
     params: SimParams,
     path: str | Path,
     progress: bool = True,
-    solver: str = "qdldl",
+    solver: str = "auto",
     max_steps: int | None = None,
 ) -> RunOutcome:
     """Simulate ``params`` into ``path`` (created, or resumed from its last checkpoint).
@@ -82,6 +82,7 @@ def run_state_point(
         sim = Simulation(params, solver=solver)
         traj.open_new(sim.state)
         counters = {}
+    traj.record_solver(sim.solver.name)
     loop = _RunLoop(params, sim, traj, counters, progress, max_steps)
     try:
         with _StopFlag() as stop:

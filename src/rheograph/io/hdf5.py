@@ -208,6 +208,10 @@ class TrajectoryFile:
         self.h5.move("checkpoint_new", "checkpoint")
         self.h5.flush()
 
+    def record_solver(self, name: str) -> None:
+        """The sparse Cholesky backend of the latest invocation (results differ only by round-off)."""
+        self.h5.attrs["solver"] = name
+
     def finish(self, status: str, summary: dict) -> None:
         self.h5.attrs["status"] = status
         grp = self.h5.require_group("summary")

@@ -134,7 +134,7 @@ class Simulation:
     >>> result = sim.step(record=True)
     """
 
-    def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "qdldl"):
+    def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "auto"):
         self.params = params
         if state is None:
             n_small, n_large = params.species_counts()
