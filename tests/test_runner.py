@@ -131,9 +131,12 @@ def test_unknown_parameter_is_rejected():
         SimParams.from_mapping({**TINY, "temperature": 1.0})
 
 
-@pytest.mark.parametrize("phi,stress", [(0.80, 200.0), (0.82, 1000.0)])
-def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, stress):
+@pytest.mark.parametrize("stress", [200.0, 1000.0])
+@pytest.mark.parametrize("phi", [0.80, 0.82])
+@pytest.mark.parametrize("integrator", ["euler", "implicit"])
+def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, stress, integrator):
     params = SimParams(
+        integrator=integrator,
         n_particles=100,
         phi=phi,
         stress=stress,
