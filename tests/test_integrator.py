@@ -112,3 +112,22 @@ def test_frictionless_low_stress_has_no_frictional_contacts():
     for _ in range(300):
         res = sim.step()
     assert res.n_frictional == 0
+
+
+def test_lagged_step_control_bounds_dt_by_the_previous_steps_pair_speeds():
+    """LF_DEM's rule: dt of step n is bounded by the pair speeds of step n-1, so a pair that sped up
+    moves further than disp_max; the default rule uses the current speeds and never overshoots."""
+    p_lag = dict(lagged_step_control=True, disp_max=2e-3)
+    sim = small_sim(**p_lag)
+    advance(sim, 300)
+    overshoots = 0
+    for _ in range(100):
+        previous = sim.state.previous_interaction_speed
+        dt = sim.step().dt
+        current = sim.state.previous_interaction_speed
+        assert previous > 0.0 and dt <= 2e-3 / previous * (1.0 + 1e-12)
+        overshoots += current * dt > 2e-3 * (1.0 + 1e-9)
+    assert overshoots > 0
+    default = small_sim(disp_max=2e-3)
+    advance(default, 50)
+    assert default.state.previous_interaction_speed == -1.0  # untouched by the default rule

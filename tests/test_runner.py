@@ -1,5 +1,7 @@
 """Trajectory files, resume after interruption, jam detection, stability, bad input."""
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -51,8 +53,9 @@ def test_file_layout_and_snapshot_targets(tmp_path):
     assert np.isfinite(info["summary"]["viscosity"])
 
 
-def test_resume_reproduces_the_uninterrupted_trajectory(tmp_path):
-    params = SimParams(**TINY)
+@pytest.mark.parametrize("lagged", [False, True])
+def test_resume_reproduces_the_uninterrupted_trajectory(tmp_path, lagged):
+    params = SimParams(**TINY, lagged_step_control=lagged)
     ref = tmp_path / "ref.h5"
     run_state_point(params, ref, progress=False)
     # interrupt twice at arbitrary points (between checkpoints: checkpoint interval forced tiny/huge)
@@ -88,6 +91,23 @@ def test_extending_the_strain_continues_a_completed_run(tmp_path):
     out = run_state_point(SimParams(**{**TINY, "strain": 0.2}), path, progress=False)
     assert out.status == "completed" and out.strain >= 0.2
     assert read_timeseries(path)["strain"].shape[0] == 20
+
+
+def test_files_written_before_a_parameter_existed_resume_with_its_default(tmp_path):
+    """A parameter added later (here lagged_step_control) is absent from older files' params and
+    checkpoint; such a file resumes as if it held the default, and continues bit-for-bit."""
+    params = SimParams(**TINY)
+    ref = tmp_path / "ref.h5"
+    run_state_point(params, ref, progress=False)
+    old = tmp_path / "old.h5"
+    run_state_point(params, old, progress=False, max_steps=40)
+    with h5py.File(old, "r+") as h5:
+        stored = json.loads(h5.attrs["params"])
+        del stored["lagged_step_control"]
+        h5.attrs["params"] = json.dumps(stored)
+        del h5["checkpoint"].attrs["previous_interaction_speed"]
+    assert run_state_point(params, old, progress=False).status == "completed"
+    np.testing.assert_array_equal(read_timeseries(ref)["time"], read_timeseries(old)["time"])
 
 
 def test_resume_refuses_another_state_point(tmp_path):

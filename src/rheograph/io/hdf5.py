@@ -136,7 +136,11 @@ class TrajectoryFile:
             )
         stored = json.loads(h5.attrs["params"])
         mine = self.params.to_dict()
-        differ = sorted(k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k) != mine[k])
+        # a parameter added after the file was written had its default value there
+        defaults = SimParams.defaults()
+        differ = sorted(
+            k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k]
+        )
         if differ:
             h5.close()
             detail = ", ".join(f"{k}: file {stored.get(k)!r} vs requested {mine[k]!r}" for k in differ)
@@ -147,7 +151,7 @@ class TrajectoryFile:
             raise TrajectoryFileError(f"{self.path}: checkpoint is incomplete; move the file away")
         state = SimState(
             **{name: cp[name][()] for name in SimState.ARRAYS},
-            **{name: cp.attrs[name] for name in SimState.SCALARS},
+            **{name: cp.attrs[name] for name in SimState.SCALARS if name in cp.attrs},
         )
         state.steps = int(state.steps)
         counters = json.loads(cp.attrs["counters"])

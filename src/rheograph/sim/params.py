@@ -34,6 +34,7 @@ class SimParams:
     kt_ratio: float = 0.5  # k_t / k_n
     disp_max: float = 1e-3  # max displacement per step [a]
     integrator: str = "euler"  # "euler" (explicit, LF_DEM) or "implicit" (linearly implicit springs)
+    lagged_step_control: bool = False  # bound dt with the previous step's pair speeds, as LF_DEM does
     dt_max: float = 1.0  # cap on dt when all velocities vanish [6 pi eta0 a^2 / F_CL]
     neighbour_skin: float = 0.4  # Verlet skin [a]; the matrix pattern lives as long as the list
     output_interval: float = 0.01  # strain between time-series rows
@@ -72,6 +73,11 @@ class SimParams:
         return dataclasses.asdict(self)
 
     @classmethod
+    def defaults(cls) -> dict:
+        """Default value of every field (all fields have one)."""
+        return {f.name: f.default for f in dataclasses.fields(cls)}
+
+    @classmethod
     def from_mapping(cls, mapping) -> SimParams:
         """Build from a dict-like (e.g. a Hydra ``sim`` node); unknown keys are an error."""
         names = {f.name for f in dataclasses.fields(cls)}
@@ -101,6 +107,7 @@ class SimParams:
         check("kt_ratio", self.kt_ratio >= 0.0, "kt_ratio >= 0")
         check("disp_max", 0.0 < self.disp_max <= 0.05, "0 < disp_max <= 0.05")
         check("integrator", self.integrator in INTEGRATORS, f"one of {INTEGRATORS}")
+        check("lagged_step_control", isinstance(self.lagged_step_control, bool), "true or false")
         check("dt_max", self.dt_max > 0.0, "dt_max > 0")
         check("neighbour_skin", 0.0 < self.neighbour_skin <= 2.0, "0 < neighbour_skin <= 2")
         check("output_interval", 0.0 < self.output_interval <= self.strain, "0 < output_interval <= strain")
