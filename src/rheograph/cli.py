@@ -11,9 +11,11 @@ from omegaconf import DictConfig, OmegaConf
 log = logging.getLogger("rheograph")
 
 
-def sim_id(n_particles, phi, stress, seed, disp_max, integrator) -> str:
-    """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler."""
-    return f"N{n_particles}_phi{phi:g}_s{stress:g}_seed{seed}_d{disp_max:g}_{integrator}"
+def sim_id(n_particles, phi, stress, seed, disp_max, integrator, lagged_step_control=False) -> str:
+    """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended
+    with LF_DEM's lagged step control)."""
+    name = f"N{n_particles}_phi{phi:g}_s{stress:g}_seed{seed}_d{disp_max:g}_{integrator}"
+    return name + "_lagged" if lagged_step_control else name
 
 
 def register_resolvers() -> None:
@@ -35,7 +37,13 @@ def simulate_main(cfg: DictConfig) -> dict:
     log.info(
         "state point %s -> %s",
         sim_id(
-            params.n_particles, params.phi, params.stress, params.seed, params.disp_max, params.integrator
+            params.n_particles,
+            params.phi,
+            params.stress,
+            params.seed,
+            params.disp_max,
+            params.integrator,
+            params.lagged_step_control,
         ),
         path,
     )

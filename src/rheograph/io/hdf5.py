@@ -242,4 +242,5 @@ def read_run_info(path: str | Path) -> dict:
             "params": json.loads(h5.attrs["params"]),
             "summary": dict(h5["summary"].attrs) if "summary" in h5 else {},
             "strain": float(h5["checkpoint"].attrs["strain"]),
+            "solver": h5.attrs.get("solver"),  # None in files written before the backend was recorded
         }

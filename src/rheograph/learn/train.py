@@ -44,7 +44,16 @@ def ensure_dataset(cfg: DictConfig) -> None:
                 }
                 params = SimParams.from_mapping(values)
                 path = directory / (
-                    sim_id(params.n_particles, phi, stress, seed, params.disp_max, params.integrator) + ".h5"
+                    sim_id(
+                        params.n_particles,
+                        phi,
+                        stress,
+                        seed,
+                        params.disp_max,
+                        params.integrator,
+                        params.lagged_step_control,
+                    )
+                    + ".h5"
                 )
                 if path.exists():
                     from rheograph.io.hdf5 import read_run_info
