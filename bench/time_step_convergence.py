@@ -24,6 +24,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from rheograph.cli import sim_id  # noqa: E402
+from rheograph.flowcurve import reference_points  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
 from rheograph.runner import run_state_point  # noqa: E402
 from rheograph.sim.params import SimParams  # noqa: E402
@@ -102,15 +103,22 @@ def plot(args) -> None:
 
     rows = collect()
     stresses = sorted({r["stress"] for r in rows})
+    reference = []
+    if args.reference and Path(args.reference).is_dir():  # LF_DEM's own runs, same estimator and window
+        reference = [
+            {**r, "scheme": "LF_DEM", "solver": "LF_DEM", "s_per_strain": float("nan")}
+            for r in reference_points(args.reference, strain_min=args.steady)
+            if r["phi"] == args.phi and r["n_particles"] == args.n and r["stress"] in stresses
+        ]
     fig, axes = plt.subplots(len(stresses), 3, figsize=(13, 3.6 * len(stresses)), squeeze=False)
     lines = [
         "| σ/σ0 | scheme | disp_max | η_r (± s.e.) | Π/σ | Z_μ | steps/strain | wall s/strain | solver |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for row_axes, stress in zip(axes, stresses):
-        for scheme, marker in MARKERS.items():
+        for scheme, marker in {**MARKERS, "LF_DEM": "x"}.items():
             sel = sorted(
-                (r for r in rows if r["stress"] == stress and r["scheme"] == scheme),
+                (r for r in rows + reference if r["stress"] == stress and r["scheme"] == scheme),
                 key=lambda r: -r["disp_max"],
             )
             if not sel:
@@ -125,10 +133,11 @@ def plot(args) -> None:
                         f"{r['disp_max']:g}", (c, yy), textcoords="offset points", xytext=(4, 4), fontsize=7
                     )
             for r in sel:
+                wall = f"{r['s_per_strain']:.1f}" if np.isfinite(r["s_per_strain"]) else "–"
                 lines.append(
                     f"| {stress:g} | {scheme} | {r['disp_max']:g} | {r['viscosity']:.1f} ± "
                     f"{r['viscosity_se']:.1f} | {r['pressure'] / stress:.3f} | {r['z_mu']:.2f} | "
-                    f"{r['steps_per_strain']:.0f} | {r['s_per_strain']:.1f} | {r['solver']} |"
+                    f"{r['steps_per_strain']:.0f} | {wall} | {r['solver']} |"
                 )
         for ax, label in zip(row_axes, ("η_r", "Π/σ", "Z_μ")):
             ax.set_xscale("log")
@@ -155,6 +164,11 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--phi", type=float, default=0.76)
     ap.add_argument("--n", type=int, default=400)
+    ap.add_argument(
+        "--reference",
+        default=str(ROOT.parent / "shared" / "reference" / "lfdem_phi0.76"),
+        help="directory of LF_DEM data_*.dat files to overlay (skipped if absent)",
+    )
     ap.add_argument("--strain", type=float, default=3.0)
     ap.add_argument("--steady", type=float, default=0.5)
     args = ap.parse_args()

@@ -101,6 +101,11 @@ def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
         d = read_lfdem_data(path)
         stress = float(m.group(3))
         s = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, strain_min)
+        # column 23 is the mean dt of the output interval ending at that row: steps = interval / mean dt
+        sel = d["strain"] >= strain_min
+        t, dt = d["time"][sel], d["dt"][sel]
+        span = d["strain"][sel][-1] - d["strain"][sel][0] if sel.sum() > 1 else 0.0
+        s["steps_per_strain"] = float(np.sum(np.diff(t) / dt[1:]) / span) if span > 0 else float("nan")
         out.append(
             dict(
                 n_particles=int(m.group(1)),
