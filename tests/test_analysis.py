@@ -59,3 +59,30 @@ def test_flow_curve_report_pools_seeds_and_flags_states(tiny_files, tmp_path):
     # eta_r grows with stress (shear thickening) in the tiny runs too
     etas = [float(r.split("|")[8].split("±")[0]) for r in rows]
     assert etas == sorted(etas)
+
+
+def test_reference_steps_per_strain_from_the_mean_dt_column(tmp_path):
+    """LF_DEM's column 23 is the mean dt of each output interval: steps = interval / mean dt."""
+    from rheograph.flowcurve import reference_points
+
+    strain = np.arange(0.0, 2.0001, 0.01)
+    table = np.zeros((strain.size, 29))
+    table[:, 0] = strain / 0.5  # time at shear rate 0.5
+    table[:, 1] = strain
+    table[:, 2] = 0.5
+    table[:, 3] = 20.0  # eta_r = sigma / rate
+    table[:, 22] = 1e-3  # -> 0.02 time per interval / 1e-3 = 20 steps per 0.01 strain
+    np.savetxt(tmp_path / "data_N400_phi0.76_s10_disp2e-3.dat", table)
+    (point,) = reference_points(tmp_path, strain_min=1.0)
+    assert point["steps_per_strain"] == pytest.approx(2000.0)
+    assert point["viscosity"] == pytest.approx(20.0)
+
+
+@pytest.mark.skipif(not REFERENCE.exists(), reason="shared reference data not present")
+def test_reference_step_counts_match_the_reference_readme():
+    """README: 1.1e4 steps per strain at disp_max 2e-3 and 1.6e4 at 1e-3 (phi 0.76, sigma/sigma0 10)."""
+    from rheograph.flowcurve import reference_points
+
+    steps = {(p["stress"], p["disp_max"]): p["steps_per_strain"] for p in reference_points(REFERENCE, 0.0)}
+    assert steps[(10.0, 2e-3)] == pytest.approx(1.1e4, rel=0.05)
+    assert steps[(10.0, 1e-3)] == pytest.approx(1.6e4, rel=0.05)
