@@ -37,7 +37,7 @@ def _is_trajectory(path: Path) -> bool:
 
 
 def collect(directories) -> list[dict]:
-    """One entry per state point (n, phi, stress, disp_max, integrator), seeds pooled."""
+    """One entry per state point (n, phi, stress, disp_max, integrator[-lagged]), seeds pooled."""
     groups = defaultdict(list)
     for directory in directories:
         for path in sorted(Path(directory).rglob("*.h5")):
@@ -56,7 +56,9 @@ def collect(directories) -> list[dict]:
                 p["stress"],
                 p["steady_state_strain"],
             )
-            key = (p["n_particles"], p["phi"], p["stress"], p["disp_max"], p["integrator"])
+            # LF_DEM's lagged step control is another discretisation: never pooled with the default
+            scheme = p["integrator"] + ("-lagged" if p.get("lagged_step_control") else "")
+            key = (p["n_particles"], p["phi"], p["stress"], p["disp_max"], scheme)
             groups[key].append(info)
     points = []
     for (n, phi, stress, disp, integrator), infos in sorted(groups.items()):
