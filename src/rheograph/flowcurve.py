@@ -6,7 +6,8 @@ LF_DEM reference data.
 writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled: the
 value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the propagated
 block standard errors.  Runs stopped early (wall-clock limit) are included and flagged by their status and
-reached strain; shear-jammed runs are listed as such and never averaged.
+reached strain; shear-jammed runs are listed as such: their viscosity is never averaged, their pressure
+and coordination (finite: the loaded static packing) are, where no seed of the state point flows.
 """
 
 from __future__ import annotations
@@ -76,14 +77,16 @@ def collect(directories) -> list[dict]:
             for i in infos
             if i["status"] in PARTIAL_OR_DONE and np.isfinite(i["summary"].get("viscosity", np.nan))
         ]
-        point["jammed"] = any(i["status"] == "jammed" for i in infos)
-        point["n_seeds"] = len(
-            flowing
-        )  # seeds that enter the averages (unfinished runs are listed, not used)
+        jammed = [i for i in infos if i["status"] == "jammed"]
+        point["jammed"] = bool(jammed)
+        # a state point with no flowing seed is described by its jammed runs: their pressure and
+        # coordination are finite (the static packing under load), their viscosity is not reported
+        source = flowing or jammed
+        point["n_seeds"] = len(source)  # seeds that enter the averages (unfinished runs are listed)
         for k in KEYS:
-            vals = np.array([i["summary"][k] for i in flowing])
-            ses = np.array([i["summary"][k + "_se"] for i in flowing])
-            if vals.size == 0:
+            vals = np.array([i["summary"][k] for i in source])
+            ses = np.array([i["summary"][k + "_se"] for i in source])
+            if vals.size == 0 or (k == "viscosity" and not flowing):
                 point[k] = point[k + "_se"] = float("nan")
                 continue
             spread = vals.std(ddof=1) / np.sqrt(vals.size) if vals.size > 1 else 0.0
@@ -129,7 +132,11 @@ def markdown_table(points, reference=()) -> str:
     ]
     for p in points:
         if p["jammed"] and not np.isfinite(p["viscosity"]):
-            vals = "shear-jammed | – | – | – | – "
+            vals = (
+                f"shear-jammed | {p['pressure'] / p['stress']:.3f} | "
+                f"{1.5 * p['pressure'] / p['stress']:.3f} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
+                f"{p['z']:.2f}"
+            )
         else:
             vals = (
                 f"{p['viscosity']:.1f} ± {p['viscosity_se']:.1f} | {p['pressure'] / p['stress']:.3f} | "
@@ -173,6 +180,8 @@ def plot(points, reference, out_png: Path) -> None:
         pts = sorted(pts, key=lambda q: q["stress"])
         s = np.array([q["stress"] for q in pts])
         label = f"φ={phi:g} (disp_max {disp:g}, {integrator})"
+        if all(q["jammed"] for q in pts):
+            label += ", shear-jammed"
         for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
             y = np.array([q[key] for q in pts])
             e = np.array([q[key + "_se"] for q in pts])
