@@ -1,6 +1,7 @@
 """Trajectory files, resume after interruption, jam detection, stability, bad input."""
 
 import json
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -228,3 +229,51 @@ def test_sigterm_checkpoints_then_exits_and_the_run_resumes(tmp_path):
         SimParams(n_particles=64, phi=0.74, stress=5.0, strain=info["strain"] + 0.01), path, progress=False
     )
     assert out.status == "completed"
+
+
+def test_jam_window_counts_the_window_total_not_single_rows():
+    from rheograph.runner import first_jammed_row
+
+    stress, eta_jam = 10.0, 1e5
+    # flowing at eta = 1e3: rows of 0.01 strain every 1 time unit -> never jammed
+    t = np.arange(50.0)
+    assert first_jammed_row(t, 0.01 * t, stress, eta_jam, 10) is None
+    # creeping with single stalled rows (each alone above eta_jam) but flowing on average: not jammed
+    d_strain = np.where(np.arange(49) % 3 == 0, 1e-6, 0.01)
+    strain = np.concatenate([[0.0], np.cumsum(d_strain)])
+    assert first_jammed_row(t, strain, stress, eta_jam, 10) is None
+    # then the strain stops: jammed once the 10-row window's total apparent viscosity exceeds eta_jam
+    strain = np.concatenate([0.01 * np.arange(20.0), np.full(30, 0.19)])
+    row = first_jammed_row(t, strain, stress, eta_jam, 10)
+    window_time, window_strain = t[row] - t[row - 10], strain[row] - strain[row - 10]
+    assert stress * window_time > eta_jam * window_strain
+    assert stress * (t[row - 1] - t[row - 11]) <= eta_jam * (strain[row - 1] - strain[row - 11])
+
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="committed trajectories not present")
+def test_default_jam_window_replayed_on_the_committed_runs_flags_only_the_jammed_ones():
+    """docs/benchmarks.md: the default window (10 rows) flags the two phi=0.80 runs that shear-jammed and
+    none of the flowing ones (phi up to 0.80, sigma up to 200, eta_r up to ~800)."""
+    from rheograph.runner import first_jammed_row
+
+    defaults = SimParams.defaults()
+    flagged, flowing = set(), 0
+    for path in sorted(DATA.rglob("*.h5")):
+        with h5py.File(path) as h5:
+            if "timeseries" not in h5:
+                continue
+            stress = json.loads(h5.attrs["params"])["stress"]
+        ts = read_timeseries(path)
+        row = first_jammed_row(
+            ts["time"], ts["strain"], stress, defaults["jam_viscosity"], defaults["jam_intervals"]
+        )
+        if row is None:
+            flowing += 1
+        else:
+            flagged.add(path.parent.name)
+            assert read_run_info(path)["status"] == "jammed"
+    assert flagged == {"N400_phi0.8_s50_seed1_d0.002_implicit", "N400_phi0.8_s200_seed1_d0.002_implicit"}
+    assert flowing >= 30

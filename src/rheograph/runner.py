@@ -4,7 +4,9 @@ Output cadence: a time-series row each ``output_interval`` of strain, or - when 
 ``output_interval * jam_viscosity / stress`` of time (the time that strain interval would take at the jam
 viscosity), so that a shear-jammed state still produces rows and can be recognised: a row whose apparent
 viscosity sigma * dt / d(strain) exceeds ``jam_viscosity`` (or whose strain went backwards) is flagged
-``jammed``; ``jam_intervals`` consecutive flagged rows end the run with status "jammed".
+``jammed``.  The run ends with status "jammed" when over its last ``jam_intervals`` rows together the
+apparent viscosity exceeds ``jam_viscosity`` (or the strain did not advance): with the default 10 rows,
+when the flow took longer than 0.1 strain would take at the jam viscosity and did not reach it.
 """
 
 from __future__ import annotations
@@ -59,6 +61,23 @@ class _StopFlag:
     def __exit__(self, *exc):
         for sig, old in self._old.items():
             signal.signal(sig, old)
+
+
+def flow_is_jammed(d_time: float, d_strain: float, stress: float, jam_viscosity: float) -> bool:
+    """Whether a flow that advanced ``d_strain`` in ``d_time`` (one row, or a window of rows together) is
+    slower than ``jam_viscosity``: sigma * dt / d(strain) > jam_viscosity, or it did not advance."""
+    return d_strain <= 0.0 or stress * d_time / d_strain > jam_viscosity
+
+
+def first_jammed_row(time, strain, stress: float, jam_viscosity: float, jam_intervals: int) -> int | None:
+    """Row of a time series at which the runner's detector ends the run as jammed (None: never);
+    replays the detector on recorded series, e.g. to choose ``jam_intervals``."""
+    d_time, d_strain = np.diff(time), np.diff(strain)
+    for end in range(jam_intervals, d_time.size + 1):
+        window = slice(end - jam_intervals, end)
+        if flow_is_jammed(d_time[window].sum(), d_strain[window].sum(), stress, jam_viscosity):
+            return end
+    return None
 
 
 def run_state_point(
@@ -145,9 +164,7 @@ class _RunLoop:
             return False
         total_time = sum(w[0] for w in self.jam_window)
         total_strain = sum(w[1] for w in self.jam_window)
-        return (
-            total_strain <= 0.0 or self.params.stress * total_time / total_strain > self.params.jam_viscosity
-        )
+        return flow_is_jammed(total_time, total_strain, self.params.stress, self.params.jam_viscosity)
 
     def run(self, stop) -> str:
         p, s, sim = self.params, self.sim.state, self.sim
@@ -195,7 +212,7 @@ class _RunLoop:
         jammed = False
         if self.last_row_time > -math.inf:
             d_time = row_time - self.last_row_time
-            jammed = d_strain <= 0.0 or p.stress * d_time / d_strain > p.jam_viscosity
+            jammed = flow_is_jammed(d_time, d_strain, p.stress, p.jam_viscosity)
             self.jam_window = (self.jam_window + [(d_time, d_strain)])[-p.jam_intervals :]
         obs = self._observables(result)
         self.traj.append_row(

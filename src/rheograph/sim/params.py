@@ -41,7 +41,7 @@ class SimParams:
     snapshot_interval: float = 0.5  # strain between configuration snapshots
     steady_state_strain: float = 1.0  # strain after which averages are taken
     jam_viscosity: float = 1e5  # apparent viscosity above which an output interval counts as jammed
-    jam_intervals: int = 100  # consecutive jammed output intervals that end the run as shear-jammed
+    jam_intervals: int = 10  # output intervals over which a jam_viscosity-slow flow ends the run as jammed
     max_wall_seconds: float = 0.0  # wall-clock budget of one invocation (0: unlimited); resumable
     checkpoint_wall_seconds: float = 60.0  # wall seconds between checkpoints
     relax_tolerance: float = 1e-4  # max overlap [a] accepted for the initial configuration
