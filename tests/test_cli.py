@@ -67,4 +67,5 @@ def test_bad_override_fails_with_the_parameter_name(tmp_path):
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode != 0
     assert "sim.phi=0.95 is invalid: allowed 0 < phi < 0.9" in done.stderr
+    assert "Traceback" not in done.stderr
     assert not list(tmp_path.rglob("*.h5"))  # nothing half-written
