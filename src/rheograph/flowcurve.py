@@ -86,6 +86,9 @@ def collect(directories) -> list[dict]:
         for k in KEYS:
             vals = np.array([i["summary"][k] for i in source])
             ses = np.array([i["summary"][k + "_se"] for i in source])
+            # a run that jammed before the steady window has no steady values: it counts as jammed only
+            keep = np.isfinite(vals)
+            vals, ses = vals[keep], ses[keep]
             if vals.size == 0 or (k == "viscosity" and not flowing):
                 point[k] = point[k + "_se"] = float("nan")
                 continue
