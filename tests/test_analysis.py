@@ -86,3 +86,19 @@ def test_reference_step_counts_match_the_reference_readme():
     steps = {(p["stress"], p["disp_max"]): p["steps_per_strain"] for p in reference_points(REFERENCE, 0.0)}
     assert steps[(10.0, 2e-3)] == pytest.approx(1.1e4, rel=0.05)
     assert steps[(10.0, 1e-3)] == pytest.approx(1.6e4, rel=0.05)
+
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "flow_curves" / "implicit"
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="committed trajectories not present")
+def test_jammed_state_points_report_the_static_packing_not_a_viscosity():
+    """phi = 0.80, sigma/sigma0 = 50: two seeds shear-jammed, one before the steady window; the point has
+    no viscosity, and the pressure and Z_mu of the seed that has a steady window."""
+    from rheograph.flowcurve import collect
+
+    (point,) = [p for p in collect([DATA]) if p["stress"] == 50.0]
+    assert point["jammed"] and point["n_seeds"] == 2
+    assert np.isnan(point["viscosity"])
+    assert 2.0 < point["pressure"] / point["stress"] < 2.2  # Pi_2D / sigma ~ 3.1, near isostatic packing
+    assert 2.5 < point["z_mu"] < 3.0
