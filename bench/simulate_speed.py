@@ -22,6 +22,7 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate
 import numpy as np  # noqa: E402
 
 from rheograph.sim import SimParams, Simulation  # noqa: E402
+from rheograph.sim.params import scheme_settings  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PHASES = ("neighbours", "assembly", "factorisation", "solve", "stress", "update")
@@ -36,8 +37,7 @@ def measure(n, disp, scheme, solver, skin, warmup, window, windows):
         phi=0.76,
         stress=10.0,
         disp_max=disp,
-        integrator=scheme.removesuffix("-lagged"),
-        lagged_step_control=scheme.endswith("-lagged"),
+        **scheme_settings(scheme),
         neighbour_skin=skin,
     )
     sim = Simulation(params, solver=solver)

@@ -23,17 +23,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from rheograph.cli import sim_id  # noqa: E402
+from rheograph.cli import run_name  # noqa: E402
 from rheograph.flowcurve import reference_points  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
 from rheograph.runner import run_state_point  # noqa: E402
-from rheograph.sim.params import SimParams  # noqa: E402
+from rheograph.sim.params import SimParams, scheme_name, scheme_settings  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "data" / "time_step"
-# scheme label -> (integrator, lagged_step_control)
-SCHEMES = {"euler-lagged": ("euler", True), "euler": ("euler", False), "implicit": ("implicit", False)}
-MARKERS = {"euler-lagged": "^", "euler": "o", "implicit": "s"}
+MARKERS = {"euler-lagged": "^", "euler": "o", "implicit": "s"}  # the schemes compared, by label
 
 
 def run(args) -> None:
@@ -41,7 +39,6 @@ def run(args) -> None:
     for seed in args.seeds:
         for stress in args.stress:
             for scheme in args.schemes:
-                integrator, lagged = SCHEMES[scheme]
                 for disp in args.disp:
                     params = SimParams(
                         n_particles=args.n,
@@ -50,12 +47,11 @@ def run(args) -> None:
                         seed=seed,
                         strain=args.strain,
                         disp_max=disp,
-                        integrator=integrator,
-                        lagged_step_control=lagged,
+                        **scheme_settings(scheme),
                         snapshot_interval=args.strain,
                         steady_state_strain=args.steady,
                     )
-                    path = OUT / (sim_id(args.n, args.phi, stress, seed, disp, integrator, lagged) + ".h5")
+                    path = OUT / (run_name(params) + ".h5")
                     outcome = run_state_point(params, path, progress=False)
                     cost_file = path.with_suffix(".cost.json")
                     if outcome.steps and outcome.wall_seconds > 1.0:
@@ -83,7 +79,7 @@ def collect() -> list[dict]:
             dict(
                 stress=p["stress"],
                 disp_max=p["disp_max"],
-                scheme=p["integrator"] + ("-lagged" if p.get("lagged_step_control") else ""),
+                scheme=scheme_name(p["integrator"], p.get("lagged_step_control", False)),
                 solver=info["solver"] or "qdldl",  # the only backend before it was recorded
                 seed=p["seed"],
                 s_per_strain=cost["wall"] / cost["strain"],
@@ -160,7 +156,7 @@ def main() -> None:
     ap.add_argument("mode", choices=("run", "plot"))
     ap.add_argument("--stress", type=float, nargs="+", default=[10.0, 200.0])
     ap.add_argument("--disp", type=float, nargs="+", default=[4e-3, 2e-3, 1e-3, 5e-4])
-    ap.add_argument("--schemes", nargs="+", choices=list(SCHEMES), default=list(SCHEMES))
+    ap.add_argument("--schemes", nargs="+", choices=list(MARKERS), default=list(MARKERS))
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--phi", type=float, default=0.76)
     ap.add_argument("--n", type=int, default=400)

@@ -69,3 +69,16 @@ def test_bad_override_fails_with_the_parameter_name(tmp_path):
     assert "sim.phi=0.95 is invalid: allowed 0 < phi < 0.9" in done.stderr
     assert "Traceback" not in done.stderr
     assert not list(tmp_path.rglob("*.h5"))  # nothing half-written
+
+
+def test_scheme_labels_round_trip_and_name_runs_apart():
+    from rheograph.cli import run_name
+    from rheograph.sim.params import INTEGRATORS, SimParams, scheme_name, scheme_settings
+
+    names = set()
+    for integrator in INTEGRATORS:
+        for lagged in (False, True):
+            label = scheme_name(integrator, lagged)
+            assert scheme_settings(label) == {"integrator": integrator, "lagged_step_control": lagged}
+            names.add(run_name(SimParams(**scheme_settings(label))))
+    assert len(names) == 4  # a lagged run never resumes a default run's file

@@ -18,6 +18,19 @@ def sim_id(n_particles, phi, stress, seed, disp_max, integrator, lagged_step_con
     return name + "_lagged" if lagged_step_control else name
 
 
+def run_name(params) -> str:
+    """``sim_id`` of a SimParams (the Hydra run directory of that state point)."""
+    return sim_id(
+        params.n_particles,
+        params.phi,
+        params.stress,
+        params.seed,
+        params.disp_max,
+        params.integrator,
+        params.lagged_step_control,
+    )
+
+
 def register_resolvers() -> None:
     if not OmegaConf.has_resolver("sim_id"):
         OmegaConf.register_new_resolver("sim_id", sim_id)
@@ -34,19 +47,7 @@ def simulate_main(cfg: DictConfig) -> dict:
     params = SimParams.from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
     run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
     path = run_dir / cfg.output_file
-    log.info(
-        "state point %s -> %s",
-        sim_id(
-            params.n_particles,
-            params.phi,
-            params.stress,
-            params.seed,
-            params.disp_max,
-            params.integrator,
-            params.lagged_step_control,
-        ),
-        path,
-    )
+    log.info("state point %s -> %s", run_name(params), path)
     outcome = run_state_point(params, path, progress=cfg.progress, solver=cfg.solver)
     log.info(
         "status %s after strain %.3f (%d steps, %.1f s)",

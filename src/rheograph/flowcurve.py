@@ -22,6 +22,7 @@ import numpy as np
 
 from rheograph.analysis import read_lfdem_data, steady_state_summary
 from rheograph.io.hdf5 import read_run_info, read_timeseries
+from rheograph.sim.params import scheme_name
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")
 # runs whose steady-state window is averaged: finished ones, and runs stopped early (wall-clock limit or
@@ -58,7 +59,7 @@ def collect(directories) -> list[dict]:
                 p["steady_state_strain"],
             )
             # LF_DEM's lagged step control is another discretisation: never pooled with the default
-            scheme = p["integrator"] + ("-lagged" if p.get("lagged_step_control") else "")
+            scheme = scheme_name(p["integrator"], p.get("lagged_step_control", False))
             key = (p["n_particles"], p["phi"], p["stress"], p["disp_max"], scheme)
             groups[key].append(info)
     points = []

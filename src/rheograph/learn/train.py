@@ -25,7 +25,7 @@ def ensure_dataset(cfg: DictConfig) -> None:
         return
     from hydra import compose
 
-    from rheograph.cli import sim_id
+    from rheograph.cli import run_name
     from rheograph.runner import run_state_point
     from rheograph.sim.params import SimParams
 
@@ -43,18 +43,7 @@ def ensure_dataset(cfg: DictConfig) -> None:
                     "seed": int(seed),
                 }
                 params = SimParams.from_mapping(values)
-                path = directory / (
-                    sim_id(
-                        params.n_particles,
-                        phi,
-                        stress,
-                        seed,
-                        params.disp_max,
-                        params.integrator,
-                        params.lagged_step_control,
-                    )
-                    + ".h5"
-                )
+                path = directory / (run_name(params) + ".h5")
                 if path.exists():
                     from rheograph.io.hdf5 import read_run_info
 

@@ -7,6 +7,18 @@ import math
 from dataclasses import dataclass
 
 INTEGRATORS = ("euler", "implicit")
+LAGGED_SUFFIX = "-lagged"  # scheme label of LF_DEM's lagged step control
+
+
+def scheme_name(integrator: str, lagged_step_control: bool) -> str:
+    """Label of a time-stepping scheme, e.g. "implicit" or "euler-lagged" (LF_DEM's discretisation)."""
+    return integrator + (LAGGED_SUFFIX if lagged_step_control else "")
+
+
+def scheme_settings(name: str) -> dict:
+    """The SimParams fields of a scheme label (inverse of ``scheme_name``)."""
+    lagged = name.endswith(LAGGED_SUFFIX)
+    return {"integrator": name.removesuffix(LAGGED_SUFFIX), "lagged_step_control": lagged}
 
 
 class ParameterError(ValueError):
