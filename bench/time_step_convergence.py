@@ -23,9 +23,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from rheograph.cli import run_name  # noqa: E402
 from rheograph.flowcurve import reference_points  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
+from rheograph.naming import run_name  # noqa: E402
 from rheograph.runner import run_state_point  # noqa: E402
 from rheograph.sim.params import SimParams, scheme_name, scheme_settings  # noqa: E402
 

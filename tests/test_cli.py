@@ -72,7 +72,7 @@ def test_bad_override_fails_with_the_parameter_name(tmp_path):
 
 
 def test_scheme_labels_round_trip_and_name_runs_apart():
-    from rheograph.cli import run_name
+    from rheograph.naming import run_name
     from rheograph.sim.params import INTEGRATORS, SimParams, scheme_name, scheme_settings
 
     names = set()

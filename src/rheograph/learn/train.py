@@ -25,7 +25,7 @@ def ensure_dataset(cfg: DictConfig) -> None:
         return
     from hydra import compose
 
-    from rheograph.cli import run_name
+    from rheograph.naming import run_name
     from rheograph.runner import run_state_point
     from rheograph.sim.params import SimParams
 

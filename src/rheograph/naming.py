@@ -1,0 +1,25 @@
+"""Names of state points: one run name shared by the CLI (Hydra run directories), training (simulated
+missing files), flow curves and the benchmarks.  Below every other module so that none imports another
+for it."""
+
+from __future__ import annotations
+
+
+def sim_id(n_particles, phi, stress, seed, disp_max, integrator, lagged_step_control=False) -> str:
+    """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended
+    with LF_DEM's lagged step control)."""
+    name = f"N{n_particles}_phi{phi:g}_s{stress:g}_seed{seed}_d{disp_max:g}_{integrator}"
+    return name + "_lagged" if lagged_step_control else name
+
+
+def run_name(params) -> str:
+    """``sim_id`` of a SimParams (the Hydra run directory of that state point)."""
+    return sim_id(
+        params.n_particles,
+        params.phi,
+        params.stress,
+        params.seed,
+        params.disp_max,
+        params.integrator,
+        params.lagged_step_control,
+    )
