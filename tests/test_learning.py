@@ -5,6 +5,7 @@ Data come from the simulator itself (tiny runs), never from hand-made physics.""
 import json
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 import torch
@@ -21,6 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 SETTINGS = GraphSettings(cutoff=0.5, min_strain=0.05)
+PARAMS = {"delta": 1e-3, "kn_coefficient": 2e4, "stress": 10.0}
 
 
 def test_edges_match_brute_force_over_all_periodic_images():
@@ -29,7 +31,7 @@ def test_edges_match_brute_force_over_all_periodic_images():
     offset = 5.3
     pos = (rng.random((60, 2)) - 0.5) * lx
     radii = np.where(rng.random(60) < 0.5, 1.0, 1.4)
-    edge_index, feats = snapshot_edges(pos, radii, lx, ly, offset, 0.5)
+    edge_index, feats, _ = snapshot_edges(pos, radii, lx, ly, offset, 0.5, PARAMS)
     got = {(int(i), int(j)): k for k, (i, j) in enumerate(edge_index.T)}
     # brute force over explicit images (including the sheared ones), no minimum-image helper
     expected = {}
@@ -51,6 +53,15 @@ def test_edges_match_brute_force_over_all_periodic_images():
         assert feats["distance"][k] == pytest.approx(r)
         assert feats["gap"][k] == pytest.approx((r - radii[i] - radii[j]) / (0.5 * (radii[i] + radii[j])))
         assert feats["cos"][k] == pytest.approx(dx / r) and feats["sin"][k] == pytest.approx(dy / r)
+        abar = 0.5 * (radii[i] + radii[j])
+        h = r - radii[i] - radii[j]
+        assert feats["contact"][k] == (h < 0)
+        assert feats["nxny"][k] == pytest.approx(dx * dy / r**2)
+        # overlap in units of delta_sigma = 6 pi / kn_coefficient; the spring force in units of F_CL
+        assert feats["overlap"][k] == pytest.approx(max(-h, 0.0) * 2e4 / (6 * np.pi))
+        k_n = 2e4 * PARAMS["stress"] / (6 * np.pi)
+        assert feats["load"][k] == pytest.approx(np.arcsinh(k_n * abar * max(-h, 0.0)))
+        assert feats["lubrication"][k] == pytest.approx(1e-3 / (max(h / abar, 0.0) + 1e-3))
     assert minimum_image(1.0, 0.0, lx, ly, offset) == (1.0, 0.0)
 
 
@@ -103,6 +114,23 @@ def test_folds_are_disjoint_and_cover_everything(groups):
     assert np.array_equal(folds, kfold_assignment(n, 5, seed=3, groups=groups))
 
 
+def test_grouped_folds_spread_each_state_point_over_folds():
+    """30 trajectories = 10 state points x 3 seeds, 5 folds: every fold tests 6 whole trajectories and
+    every state point keeps >= 1 trajectory in the training part (fold k tested, k + 1 validation)."""
+    runs = np.repeat(np.arange(30), 7)
+    strata = runs // 3
+    folds = kfold_assignment(runs.size, 5, seed=1, groups=runs, strata=strata)
+    for g in range(30):
+        assert np.unique(folds[runs == g]).size == 1
+    per_fold = [np.unique(runs[folds == f]).size for f in range(5)]
+    assert per_fold == [6] * 5
+    for s in range(10):
+        assert np.unique(folds[strata == s]).size == 3  # its 3 seeds in 3 different folds
+        for k in range(5):
+            training = (folds != k) & (folds != (k + 1) % 5)
+            assert (training & (strata == s)).any()
+
+
 @pytest.mark.parametrize("split", ["random", "grouped"])
 def test_datamodule_splits_and_scaling(tiny_files, tmp_path, split):
     seen = []
@@ -141,6 +169,30 @@ def compose_train(overrides):
         return compose(config_name="train", overrides=overrides)
 
 
+def test_load_feature_reproduces_the_simulators_frictional_contacts(tiny_files):
+    """The CLM makes a contact frictional exactly when k_n a_bar overlap > F_CL: from positions and the
+    imposed stress, the ``load`` feature must select the very contacts the simulator recorded as sticking
+    or sliding, and reproduce the snapshot's Z_mu."""
+    for path in tiny_files:
+        with h5py.File(path) as h5:
+            params = json.loads(h5.attrs["params"])
+            radii, sn = h5["radii"][()], h5["snapshots"]
+            offsets = sn["contact_offset"][()]
+            for k in range(0, sn["strain"].size, 3):
+                _, feats, pairs = snapshot_edges(
+                    sn["positions"][k], radii, h5.attrs["lx"], h5.attrs["ly"], sn["le_offset"][k], 0.5, params
+                )
+                npair = pairs["i"].size
+                frictional = feats["load"][:npair] > np.arcsinh(1.0)
+                mine = {(int(a), int(b)) for a, b in zip(pairs["i"][frictional], pairs["j"][frictional])}
+                rows = slice(offsets[k], offsets[k + 1])
+                recorded = sn["contact_pairs"][rows][sn["contact_state"][rows] >= 2]
+                assert mine == {tuple(sorted(map(int, pair))) for pair in recorded}
+                touching = {(int(a), int(b)) for a, b, x in zip(pairs["i"], pairs["j"], pairs["xi"]) if x < 0}
+                assert touching == {tuple(sorted(map(int, pair))) for pair in sn["contact_pairs"][rows]}
+                assert 2 * len(mine) / radii.size == pytest.approx(sn["z_mu"][k])
+
+
 def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     from rheograph.learn.predict import predict_file
     from rheograph.learn.train import train_folds
@@ -150,6 +202,8 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
         [
             f"data.files={pattern}",
             f"data.cache_dir={tmp_path / 'cache'}",
+            "data.phi=null",
+            "data.split=random",
             "data.num_folds=3",
             "fold=0",
             "data.batch_size=8",

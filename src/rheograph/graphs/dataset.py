@@ -15,8 +15,11 @@ from torch_geometric.data import Data, InMemoryDataset
 
 from rheograph.graphs.features import (
     EDGE_FEATURES,
+    GRAPH_INPUTS,
+    PAPER_EDGE_FEATURES,
     forward_transform,
     node_features,
+    snapshot_descriptors,
     snapshot_edges,
 )
 from rheograph.io.hdf5 import SCHEMA_VERSION
@@ -29,7 +32,8 @@ class GraphSettings:
     """Everything that determines a graph and its targets (hashed into the cache directory name)."""
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
-    edge_features: tuple = EDGE_FEATURES
+    edge_features: tuple = PAPER_EDGE_FEATURES
+    graph_inputs: tuple = ()  # graph-level inputs (log_stress, phi): known conditions of the snapshot
     min_strain: float = 1.0  # snapshots before this strain (start-up transient) are skipped
     viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
     pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
@@ -42,6 +46,11 @@ class GraphSettings:
             raise ValueError(
                 f"graph.edge_features={list(self.edge_features)}: allowed a non-empty subset "
                 f"of {list(EDGE_FEATURES)}"
+            )
+        unknown = set(self.graph_inputs) - set(GRAPH_INPUTS)
+        if unknown:
+            raise ValueError(
+                f"graph.graph_inputs={list(self.graph_inputs)}: allowed a subset of {list(GRAPH_INPUTS)}"
             )
         for name in ("viscosity_scale", "pressure_scale"):
             if getattr(self, name) <= 0:
@@ -67,6 +76,7 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
         ):
             raise ValueError(f"{path}: not a rheograph trajectory of schema {SCHEMA_VERSION}")
         params = json.loads(h5.attrs["params"])
+        status = str(h5.attrs.get("status", ""))
         lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
         radii = h5["radii"][()]
         sn = h5["snapshots"]
@@ -76,9 +86,13 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
         keep = np.flatnonzero((strain >= settings.min_strain) & np.isfinite(raw).all(axis=1))
         positions = sn["positions"][keep] if keep.size else np.empty((0, radii.size, 2))
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
+    known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
+    u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
     graphs = []
     for k, idx in enumerate(keep):
-        edge_index, feats = snapshot_edges(positions[k], radii, lx, ly, offsets[idx], settings.cutoff)
+        edge_index, feats, pairs = snapshot_edges(
+            positions[k], radii, lx, ly, offsets[idx], settings.cutoff, params
+        )
         edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
         y = settings.transform_targets(*raw[idx])
         graphs.append(
@@ -88,6 +102,11 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
                 edge_attr=torch.from_numpy(edge_attr).float(),
                 y=torch.from_numpy(y).float().view(1, 3),
                 y_raw=torch.from_numpy(raw[idx]).double().view(1, 3),
+                u=u,
+                area=torch.tensor([lx * ly], dtype=torch.float32),
+                descriptors=torch.from_numpy(snapshot_descriptors(pairs, radii.size, lx * ly)).view(1, -1),
+                n_particles=torch.tensor([radii.size]),
+                jammed=torch.tensor([status == "jammed"]),
                 phi=torch.tensor([params["phi"]], dtype=torch.float64),
                 stress=torch.tensor([params["stress"]], dtype=torch.float64),
                 strain=torch.tensor([strain[idx]], dtype=torch.float64),
@@ -119,7 +138,7 @@ class SnapshotGraphDataset(InMemoryDataset):
                 "settings": asdict(settings),
                 "files": _files_fingerprint(self.files),
                 "schema": SCHEMA_VERSION,
-                "version": 1,
+                "version": 2,
             },
             sort_keys=True,
             default=list,

@@ -1,9 +1,28 @@
-"""Graph features of a sheared-suspension snapshot (pure numpy/numba; no torch here).
+"""Graph features of a sheared-suspension snapshot (pure numpy; no torch here).
 
 Nodes are particles, with the one-hot of their radius (small, large) as features.  Edges join pairs whose
 surface gap h = r - a_i - a_j is below ``cutoff`` (in units of the small radius a), found with the
-Lees–Edwards images; both directions are present.  Edge features (seed paper): dimensionless gap
-h / a_bar, centre distance r, its components (dx, dy), and sin, cos of its angle to the flow direction.
+Lees–Edwards images; both directions are present.
+
+Edge features, by name (``EDGE_FEATURES``):
+
+* the seed paper's geometry: ``gap`` (reduced gap xi = h / a_bar, a_bar = (a_i + a_j)/2), ``distance`` r,
+  its components ``dx``, ``dy``, and ``sin``, ``cos`` of its angle to the flow direction;
+* physics-aware, from positions alone — they make contacts and lubrication visible, which a raw gap of
+  ~1e-3 a next to distances of 2–3 a hides from a linear encoder:
+  ``contact`` (1 when the surfaces overlap, h < 0), ``overlap`` (overlap in units of delta_sigma =
+  6 pi / kn_coefficient, the overlap whose spring force is sigma a_bar: with k_n proportional to sigma,
+  the overlaps are statistically stress-independent in these units), ``lubrication`` (delta / (xi + delta)
+  in (0, 1]: the squeeze resistance 1/(xi + delta) of physics.md, frozen at xi = 0 in contact like the
+  dashpot), ``log_lubrication`` (log(1/(xi + delta)), the tangential resistance), ``nxny`` (n_x n_y, the
+  shear-stress projection of a pair stresslet) and ``nxx_nyy`` (n_x^2 - n_y^2, the normal-stress
+  difference projection);
+* stress-conditioned (needs the imposed stress, as every simulation and rheometer knows it):
+  ``load`` = asinh(F_n / F_CL) of the contact spring F_n = k_n a_bar overlap (0 when apart).  The
+  Critical Load Model makes a contact frictional exactly when F_n > F_CL, i.e. load > asinh(1).
+
+All features are O(1) numbers on purpose; the model standardises them with statistics of its training
+folds anyway.
 """
 
 from __future__ import annotations
@@ -12,31 +31,112 @@ import numpy as np
 
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
 
-EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
+PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
+PHYSICS_EDGE_FEATURES = ("contact", "overlap", "lubrication", "log_lubrication", "nxny", "nxx_nyy")
+STRESS_EDGE_FEATURES = ("load",)
+EDGE_FEATURES = PAPER_EDGE_FEATURES + PHYSICS_EDGE_FEATURES + STRESS_EDGE_FEATURES
 
 
-def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff):
-    """Directed edges (2, 2P) and per-edge geometry for pairs with gap < cutoff (units of a).
+def overlap_unit(kn_coefficient: float) -> float:
+    """delta_sigma [a]: overlap at which the normal spring force per a_bar equals the imposed stress.
 
-    Returns (edge_index, features dict of (2P,) arrays).  Edge k and k + P are the two directions of one
-    pair; the vector of the second is the negative of the first.
-    """
+    k_n = kn_coefficient * sigma / (6 pi) [F_CL / a] (physics.md §3.2), so k_n a_bar delta = sigma a_bar
+    (delta / delta_sigma) with delta_sigma = 6 pi / kn_coefficient (9.4e-4 a at LF_DEM's 2e4)."""
+    return 6.0 * np.pi / kn_coefficient
+
+
+def snapshot_pairs(positions, radii, lx, ly, le_offset, cutoff, params) -> dict:
+    """Per-pair geometry (P pairs i < j with gap < cutoff, units of a): indices ``i``, ``j``, reduced gap
+    ``xi``, distance ``r``, normal ``nx``, ``ny`` (i -> j), ``abar`` = (a_i + a_j)/2, ``overlap`` (units of
+    delta_sigma, 0 when apart) and ``lub_gap`` = max(xi, 0) + delta (the regularised lubrication gap).
+
+    ``params`` is the run's parameter mapping (``delta`` and ``kn_coefficient`` are read)."""
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, le_offset, 0.0, cutoff)
     nvec, r, xi, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, le_offset)
-    gap = r - radii[pair_i] - radii[pair_j]
-    keep = gap < cutoff
+    keep = r - radii[pair_i] - radii[pair_j] < cutoff
     pair_i, pair_j, nvec, r, xi = pair_i[keep], pair_j[keep], nvec[keep], r[keep], xi[keep]
-    dx, dy = nvec[:, 0] * r, nvec[:, 1] * r
-    edge_index = np.stack([np.r_[pair_i, pair_j], np.r_[pair_j, pair_i]])
-    feats = {
-        "gap": np.r_[xi, xi],
-        "distance": np.r_[r, r],
-        "dx": np.r_[dx, -dx],
-        "dy": np.r_[dy, -dy],
-        "sin": np.r_[nvec[:, 1], -nvec[:, 1]],
-        "cos": np.r_[nvec[:, 0], -nvec[:, 0]],
+    abar = 0.5 * (radii[pair_i] + radii[pair_j])
+    return {
+        "i": pair_i,
+        "j": pair_j,
+        "xi": xi,
+        "r": r,
+        "nx": nvec[:, 0],
+        "ny": nvec[:, 1],
+        "abar": abar,
+        "overlap": np.maximum(-xi, 0.0) * abar / overlap_unit(float(params["kn_coefficient"])),
+        "lub_gap": np.maximum(xi, 0.0) + float(params["delta"]),
     }
-    return edge_index, feats
+
+
+def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params):
+    """Directed edges (2, 2P) and every edge feature for pairs with gap < cutoff (units of a).
+
+    ``params`` is the run's parameter mapping (``delta``, ``kn_coefficient``, ``stress`` are read).
+    Returns (edge_index, features dict of (2P,) float64 arrays, the pair dict of ``snapshot_pairs``).
+    Edge k and k + P are the two directions of one pair; the vector of the second is the negative of the
+    first, scalar features are shared.
+    """
+    p = snapshot_pairs(positions, radii, lx, ly, le_offset, cutoff, params)
+    xi, r, nx, ny, overlap, lub_gap = p["xi"], p["r"], p["nx"], p["ny"], p["overlap"], p["lub_gap"]
+    # F_n / F_CL = k_n a_bar overlap = stress * a_bar * overlap (overlap in units of delta_sigma)
+    load = np.arcsinh(float(params["stress"]) * p["abar"] * overlap)
+    pair_features = {
+        "gap": (xi, 1.0),
+        "distance": (r, 1.0),
+        "dx": (nx * r, -1.0),
+        "dy": (ny * r, -1.0),
+        "sin": (ny, -1.0),
+        "cos": (nx, -1.0),
+        "contact": ((xi < 0).astype(np.float64), 1.0),
+        "overlap": (overlap, 1.0),
+        "lubrication": (float(params["delta"]) / lub_gap, 1.0),
+        "log_lubrication": (-np.log(lub_gap), 1.0),
+        "nxny": (nx * ny, 1.0),
+        "nxx_nyy": (nx * nx - ny * ny, 1.0),
+        "load": (load, 1.0),
+    }
+    edge_index = np.stack([np.r_[p["i"], p["j"]], np.r_[p["j"], p["i"]]])
+    feats = {name: np.r_[value, sign * value] for name, (value, sign) in pair_features.items()}
+    return edge_index, feats, p
+
+
+# ---- per-snapshot physics descriptors (the no-message-passing baseline) --------------------------
+DESCRIPTORS = (
+    "contact_number",  # 2 N_contacts / N from h < 0
+    "mean_overlap",  # mean overlap over contacts [delta_sigma]
+    "contact_shear",  # sum over contacts of overlap a_bar r n_x n_y per area: sigma_xy^contact / sigma
+    "contact_pressure",  # sum over contacts of overlap a_bar r per area: the contact pressure / sigma
+    "contact_fabric",  # mean n_x n_y over contacts (anisotropy of the contact network)
+    "lubrication_shear",  # sum over pairs of a_bar r (n_x n_y)^2 / (xi + delta) per area
+    "lubrication_sum",  # sum over pairs of 1 / (xi + delta) per particle
+    "near_contact_number",  # 2 N_pairs(xi < 0.05) / N: pairs about to touch
+)
+
+
+def snapshot_descriptors(pairs: dict, n_particles: int, area: float) -> np.ndarray:
+    """Eight per-snapshot descriptors (``DESCRIPTORS``) from the pair dict of ``snapshot_pairs``.
+
+    The contact and lubrication sums are the stress expressions of physics.md §4 with the force replaced
+    by what positions determine (overlap in units of delta_sigma, resistance 1/(xi + delta)): with k_n
+    proportional to sigma they are the contact stress in units of sigma and the lubrication stress per
+    unit shear rate up to prefactors."""
+    touching = pairs["xi"] < 0
+    nxny = pairs["nx"] * pairs["ny"]
+    overlap, abar, r = pairs["overlap"], pairs["abar"], pairs["r"]
+    n_contacts = int(touching.sum())
+    return np.array(
+        [
+            2.0 * n_contacts / n_particles,
+            overlap[touching].mean() if n_contacts else 0.0,
+            np.sum((overlap * abar * r * nxny)[touching]) / area,
+            np.sum((overlap * abar * r)[touching]) / area,
+            nxny[touching].mean() if n_contacts else 0.0,
+            np.sum(abar * r * nxny**2 / pairs["lub_gap"]) / area,
+            np.sum(1.0 / pairs["lub_gap"]) / n_particles,
+            2.0 * np.sum(pairs["xi"] < 0.05) / n_particles,
+        ]
+    )
 
 
 def node_features(radii, size_ratio):
@@ -44,8 +144,17 @@ def node_features(radii, size_ratio):
     large = np.isclose(radii, size_ratio)
     small = np.isclose(radii, 1.0)
     if not np.all(large | small):
-        raise ValueError("radii must be 1 or size_ratio for the one-hot node features")
+        raise ValueError(
+            f"radii must be 1 or size_ratio={size_ratio} for the one-hot node features "
+            f"(found {np.unique(np.round(radii[~(large | small)], 6))[:5].tolist()})"
+        )
     return np.stack([small, large], axis=1).astype(np.float32)
+
+
+# ---- graph-level inputs ---------------------------------------------------------------------------
+# Known for every snapshot of a run: log(sigma/sigma0), the imposed stress on a log scale (it spans
+# 0.5-200), and phi for models pooled over area fractions.
+GRAPH_INPUTS = ("log_stress", "phi")
 
 
 # ---- target transforms ---------------------------------------------------------------------------

@@ -2,8 +2,11 @@
 
 Splits (``split``): ``random`` shuffles snapshots (the seed paper's choice; snapshots of one trajectory are
 correlated, so test scores are optimistic) or ``grouped`` keeps every run (trajectory file) inside one
-fold.  Fold k is the test set, fold (k + 1) mod K the validation set (early stopping, checkpointing),
-the rest the training set.  Target standardisation is fitted on the training part only.
+fold — the honest estimate on trajectories the model has never seen — with the runs of each state point
+(phi, sigma) spread over consecutive folds, so that with >= 3 seeds per state point every stress is
+present in the training part of every fold.  Fold k is the test set, fold (k + 1) mod K the validation
+set (early stopping, checkpointing), the rest the training set.  Target and edge-feature standardisation
+are fitted on the training part only.
 """
 
 from __future__ import annotations
@@ -22,8 +25,19 @@ from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
 SPLITS = ("random", "grouped")
 
 
-def kfold_assignment(n_items: int, num_folds: int, seed: int, groups: np.ndarray | None = None) -> np.ndarray:
-    """Fold index (0..K-1) of every item; with ``groups`` all items of a group share a fold."""
+def kfold_assignment(
+    n_items: int,
+    num_folds: int,
+    seed: int,
+    groups: np.ndarray | None = None,
+    strata: np.ndarray | None = None,
+) -> np.ndarray:
+    """Fold index (0..K-1) of every item; with ``groups`` all items of a group share a fold.
+
+    With ``strata`` (one label per item, constant within a group: the state point of a run) the groups
+    of each stratum go to consecutive folds, continuing where the previous stratum ended, so that folds
+    hold equal numbers of groups and a stratum with g groups appears in min(g, K) folds.
+    """
     rng = np.random.default_rng(seed)
     if groups is None:
         order = rng.permutation(n_items)
@@ -33,6 +47,15 @@ def kfold_assignment(n_items: int, num_folds: int, seed: int, groups: np.ndarray
     unique = np.unique(groups)
     if unique.size < num_folds:
         raise ValueError(f"grouped split needs at least num_folds={num_folds} runs, got {unique.size}")
+    if strata is not None:
+        stratum_of = {g: strata[np.flatnonzero(groups == g)[0]] for g in unique}
+        fold_of, next_fold = {}, int(rng.integers(num_folds))
+        for stratum in sorted(set(stratum_of.values())):
+            members = rng.permutation([g for g in unique if stratum_of[g] == stratum])
+            for g in members:
+                fold_of[g] = next_fold
+                next_fold = (next_fold + 1) % num_folds
+        return np.array([fold_of[g] for g in groups], dtype=np.int64)
     # greedy balancing: largest groups first into the currently smallest fold (ties broken by seed)
     sizes = {g: int(np.sum(groups == g)) for g in unique}
     order = sorted(rng.permutation(unique), key=lambda g: -sizes[g])
@@ -84,8 +107,13 @@ class SnapshotDataModule(L.LightningDataModule):
             index = index[np.isclose(dataset.phi.numpy(), self.phi)]
             if index.size == 0:
                 raise ValueError(f"data.phi={self.phi}: no snapshots at this area fraction")
-        groups = dataset.run_id.numpy()[index] if self.split == "grouped" else None
-        folds = kfold_assignment(index.size, self.num_folds, self.split_seed, groups)
+        groups, strata = None, None
+        if self.split == "grouped":
+            groups = dataset.run_id.numpy()[index]
+            strata = np.round(dataset.phi.numpy()[index], 6) * 1e6 + np.round(
+                dataset.stress.numpy()[index], 6
+            )
+        folds = kfold_assignment(index.size, self.num_folds, self.split_seed, groups, strata)
         self.dataset = dataset
         self.test_idx = index[folds == self.fold]
         self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
@@ -93,6 +121,11 @@ class SnapshotDataModule(L.LightningDataModule):
         y = dataset.y[torch.as_tensor(self.train_idx)]
         self.target_mean = y.mean(dim=0)
         self.target_std = y.std(dim=0).clamp_min(1e-6)
+        # edge-feature standardisation, fitted on the training graphs only (binary and constant
+        # features get std 1 where they do not vary)
+        edges = torch.cat([dataset[int(i)].edge_attr for i in self.train_idx]).double()
+        self.edge_mean = edges.mean(dim=0).float()
+        self.edge_std = edges.std(dim=0).clamp_min(1e-6).float()
 
     def split_record(self) -> dict:
         return {

@@ -2,18 +2,33 @@
 
 from __future__ import annotations
 
+import torch
 from torch import nn
 from torch_geometric.nn import DeepGCNLayer, GENConv, global_add_pool, global_max_pool, global_mean_pool
 
-POOLS = {"mean": global_mean_pool, "add": global_add_pool, "max": global_max_pool}
+
+def _area_pool(x, batch, area):
+    """Sum over the particles of a graph divided by its box area: an intensive, stress-like readout
+    (the stress is a sum over pairs per area), comparable across system sizes."""
+    return global_add_pool(x, batch) / area.view(-1, 1)
+
+
+POOLS = {"mean": global_mean_pool, "add": global_add_pool, "max": global_max_pool, "area": _area_pool}
 BLOCKS = ("res", "res+", "dense", "plain")
+AGGRS = ("softmax", "mean", "add", "max", "powermean")
 
 
 class ResGCN(nn.Module):
     """Node/edge encoders -> ``num_layers`` DeepGCN layers (GENConv, batch norm, ReLU, dropout, residual)
-    -> graph pooling -> linear head with ``out_channels`` outputs.
+    -> graph pooling -> head (``head_layers`` linear layers) with ``out_channels`` outputs.
 
-    Shapes: x (N, node_in), edge_attr (E, edge_in), batch (N,) -> (G, out_channels).
+    Graph-level inputs u (G, global_in) — the imposed log stress, phi — are encoded and added to every node
+    embedding before message passing, and concatenated to the pooled embedding before the head.
+    Edge features are standardised inside the model with buffers fitted on the training folds
+    (``set_edge_scaling``), so a saved model maps raw features to predictions.
+
+    Shapes: x (N, node_in), edge_attr (E, edge_in), batch (N,), u (G, global_in), area (G,)
+    -> (G, out_channels).
     """
 
     def __init__(
@@ -28,17 +43,24 @@ class ResGCN(nn.Module):
         pool: str = "mean",
         out_channels: int = 3,
         mlp_layers: int = 2,
+        global_in: int = 0,
+        head_layers: int = 1,
     ):
         super().__init__()
         if block not in BLOCKS:
             raise ValueError(f"model.block={block!r} is invalid: allowed {BLOCKS}")
         if pool not in POOLS:
             raise ValueError(f"model.pool={pool!r} is invalid: allowed {sorted(POOLS)}")
-        if num_layers < 1 or hidden < 1:
-            raise ValueError("model.num_layers and model.hidden must be >= 1")
-        self.block = block
+        if aggr not in AGGRS:
+            raise ValueError(f"model.aggr={aggr!r} is invalid: allowed {AGGRS}")
+        if num_layers < 1 or hidden < 1 or head_layers < 1:
+            raise ValueError("model.num_layers, model.hidden and model.head_layers must be >= 1")
+        self.block, self.pool_name, self.global_in = block, pool, global_in
         self.node_encoder = nn.Linear(node_in, hidden)
         self.edge_encoder = nn.Linear(edge_in, hidden)
+        self.register_buffer("edge_mean", torch.zeros(edge_in))
+        self.register_buffer("edge_std", torch.ones(edge_in))
+        self.global_encoder = nn.Linear(global_in, hidden) if global_in else None
         self.layers = nn.ModuleList()
         for _ in range(num_layers):
             conv = GENConv(
@@ -63,11 +85,21 @@ class ResGCN(nn.Module):
             )
         self.dropout = dropout
         self.pool = POOLS[pool]
-        self.head = nn.Linear(hidden, out_channels)
+        head, width = [], hidden + global_in
+        for _ in range(head_layers - 1):
+            head += [nn.Linear(width, hidden), nn.ReLU()]
+            width = hidden
+        self.head = nn.Sequential(*head, nn.Linear(width, out_channels))
 
-    def forward(self, x, edge_index, edge_attr, batch):
+    def set_edge_scaling(self, mean: torch.Tensor, std: torch.Tensor) -> None:
+        self.edge_mean.copy_(mean)
+        self.edge_std.copy_(std)
+
+    def forward(self, x, edge_index, edge_attr, batch, u=None, area=None):
         x = self.node_encoder(x)
-        e = self.edge_encoder(edge_attr)
+        e = self.edge_encoder((edge_attr - self.edge_mean) / self.edge_std)
+        if self.global_encoder is not None:
+            x = x + self.global_encoder(u)[batch]
         if self.block == "res+":
             # pre-activation residual: the first conv has no norm/act before it; a final norm+act after
             x = self.layers[0].conv(x, edge_index, e)
@@ -78,7 +110,10 @@ class ResGCN(nn.Module):
         else:
             for layer in self.layers:
                 x = layer(x, edge_index, e)
-        return self.head(self.pool(x, batch))
+        pooled = self.pool(x, batch, area) if self.pool_name == "area" else self.pool(x, batch)
+        if self.global_in:
+            pooled = torch.cat([pooled, u], dim=1)
+        return self.head(pooled)
 
 
 def count_parameters(model: nn.Module) -> int:

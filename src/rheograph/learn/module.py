@@ -11,6 +11,7 @@ from rheograph.graphs.features import inverse_transform
 from rheograph.learn.model import ResGCN
 
 TARGET_NAMES = ("eta", "pressure", "z_mu")
+LR_SCHEDULES = ("constant", "cosine")
 
 
 def physical_targets(y_transformed: np.ndarray, viscosity_scale: float, pressure_scale: float) -> np.ndarray:
@@ -22,17 +23,73 @@ def physical_targets(y_transformed: np.ndarray, viscosity_scale: float, pressure
     )
 
 
+def r2_score(pred: np.ndarray, true: np.ndarray) -> float:
+    ss_res = float(np.sum((true - pred) ** 2))
+    ss_tot = float(np.sum((true - true.mean()) ** 2))
+    return 1.0 - ss_res / ss_tot if ss_tot > 0 else float("nan")
+
+
+LOG_TARGETS = ("eta", "pressure")  # scored on a log scale too (seed paper), Z_mu only linearly
+
+
 def regression_metrics(pred: np.ndarray, true: np.ndarray) -> dict:
-    """R^2, MAE and MAPE per target (physical units); MAPE skips |true| < 1e-8 (e.g. Z_mu = 0)."""
+    """Per target (G, 3) physical units: R^2, MAE, MAPE (skips |true| < 1e-8, e.g. Z_mu = 0) and the
+    fraction within +-15 % (``within15``; for Z_mu within +-15 % or 0.05, so that Z_mu = 0 counts).
+
+    For eta_r and Pi also ``r2_log_*``: R^2 of log10 over the graphs where truth and prediction are both
+    positive (log undefined otherwise; a noisy low-stress Pi or a reversing shear rate can be <= 0), with
+    ``n_nonpositive_*`` the number of graphs left out (reported, never hidden).
+    """
     out = {}
     for k, name in enumerate(TARGET_NAMES):
         p, t = pred[:, k], true[:, k]
-        ss_res = float(np.sum((t - p) ** 2))
-        ss_tot = float(np.sum((t - t.mean()) ** 2))
-        out[f"r2_{name}"] = 1.0 - ss_res / ss_tot if ss_tot > 0 else float("nan")
+        out[f"r2_{name}"] = r2_score(p, t)
         out[f"mae_{name}"] = float(np.mean(np.abs(t - p)))
         nz = np.abs(t) > 1e-8
         out[f"mape_{name}"] = float(np.mean(np.abs((t[nz] - p[nz]) / t[nz]))) if nz.any() else float("nan")
+        tolerance = 0.15 * np.abs(t) if name != "z_mu" else np.maximum(0.15 * np.abs(t), 0.05)
+        out[f"within15_{name}"] = float(np.mean(np.abs(p - t) <= tolerance))
+        if name in LOG_TARGETS:
+            positive = (p > 0) & (t > 0)
+            out[f"r2_log_{name}"] = (
+                r2_score(np.log10(p[positive]), np.log10(t[positive])) if positive.sum() > 1 else float("nan")
+            )
+            out[f"n_nonpositive_{name}"] = int((~positive).sum())
+    return out
+
+
+def fluctuation_correlation(pred: np.ndarray, true: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """Pearson correlation (per target) of predicted and true deviations from their state-point means.
+
+    ``groups`` (G,) labels the state point (phi, sigma) of each graph; eta_r and Pi are compared in log10
+    (their fluctuations are multiplicative), Z_mu linearly.  Groups with fewer than 3 graphs are skipped.
+    Knowing only the stress gives 0 here: this measures whether a snapshot's own fluctuation is read.
+    """
+    p = np.array(pred, dtype=np.float64)
+    t = np.array(true, dtype=np.float64)
+    for k, name in enumerate(TARGET_NAMES):
+        if name in LOG_TARGETS:
+            p[:, k] = np.log10(np.clip(p[:, k], 1e-12, None))
+            t[:, k] = np.log10(np.clip(t[:, k], 1e-12, None))
+    dp, dt = [], []
+    for g in np.unique(groups):
+        m = groups == g
+        if m.sum() < 3:
+            continue
+        dp.append(p[m] - p[m].mean(axis=0))
+        dt.append(t[m] - t[m].mean(axis=0))
+    if not dp:
+        return np.full(len(TARGET_NAMES), np.nan)
+    dp, dt = np.concatenate(dp), np.concatenate(dt)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.array([np.corrcoef(dp[:, k], dt[:, k])[0, 1] for k in range(len(TARGET_NAMES))])
+
+
+def fold_metrics(pred: np.ndarray, true: np.ndarray, groups: np.ndarray) -> dict:
+    """``regression_metrics`` plus ``fluct_*``: the within-state-point fluctuation correlation."""
+    out = regression_metrics(pred, true)
+    for name, value in zip(TARGET_NAMES, fluctuation_correlation(pred, true, groups)):
+        out[f"fluct_{name}"] = float(value)
     return out
 
 
@@ -53,10 +110,14 @@ class SurrogateModule(L.LightningModule):
         block: str = "res+",
         dropout: float = 0.1,
         pool: str = "mean",
+        global_in: int = 0,
+        head_layers: int = 1,
         lr: float = 5e-3,
         weight_decay: float = 0.0,
         loss_weights=(1.0, 1.0, 1.0),
         huber_beta: float = 1.0,
+        lr_schedule: str = "constant",
+        warmup_epochs: int = 0,
         viscosity_scale: float = 1.0,
         pressure_scale: float = 0.1,
     ):
@@ -64,9 +125,25 @@ class SurrogateModule(L.LightningModule):
         self.save_hyperparameters()
         if lr <= 0:
             raise ValueError(f"model.lr={lr} is invalid: allowed > 0")
+        if lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"model.lr_schedule={lr_schedule!r} is invalid: allowed {LR_SCHEDULES}")
+        if warmup_epochs < 0:
+            raise ValueError(f"model.warmup_epochs={warmup_epochs} is invalid: allowed >= 0")
         if len(loss_weights) != 3 or min(loss_weights) < 0:
             raise ValueError(f"model.loss_weights={list(loss_weights)}: three weights >= 0")
-        self.net = ResGCN(node_in, edge_in, hidden, num_layers, aggr, block, dropout, pool, 3)
+        self.net = ResGCN(
+            node_in,
+            edge_in,
+            hidden,
+            num_layers,
+            aggr,
+            block,
+            dropout,
+            pool,
+            3,
+            global_in=global_in,
+            head_layers=head_layers,
+        )
         self.register_buffer("target_mean", torch.zeros(3))
         self.register_buffer("target_std", torch.ones(3))
         self.register_buffer("loss_weights", torch.tensor(list(loss_weights), dtype=torch.float32))
@@ -77,16 +154,22 @@ class SurrogateModule(L.LightningModule):
         self.target_mean.copy_(mean)
         self.target_std.copy_(std)
 
+    def _net(self, batch) -> torch.Tensor:
+        return self.net(batch.x, batch.edge_index, batch.edge_attr, batch.batch, batch.u, batch.area)
+
     def forward(self, batch) -> torch.Tensor:
         """Predicted transformed targets (G, 3) (not standardised)."""
-        z = self.net(batch.x, batch.edge_index, batch.edge_attr, batch.batch)
-        return z * self.target_std + self.target_mean
+        return self._net(batch) * self.target_std + self.target_mean
 
     def _step(self, batch, stage: str):
-        z = self.net(batch.x, batch.edge_index, batch.edge_attr, batch.batch)
+        z = self._net(batch)
         target = (batch.y - self.target_mean) / self.target_std
         per_target = self.huber(z, target).mean(dim=0)
         loss = (per_target * self.loss_weights).sum()
+        if not torch.isfinite(loss):
+            raise FloatingPointError(
+                f"{stage} loss is {loss.item()} (diverged): lower model.lr or check the inputs"
+            )
         size = batch.num_graphs
         self.log(
             f"{stage}/loss", loss, batch_size=size, on_epoch=True, on_step=False, prog_bar=stage == "val"
@@ -123,7 +206,9 @@ class SurrogateModule(L.LightningModule):
             physical_targets(pred, hp.viscosity_scale, hp.pressure_scale),
             physical_targets(true, hp.viscosity_scale, hp.pressure_scale),
         )
-        self.log_dict({f"{stage}/{k}": v for k, v in metrics.items()}, on_epoch=True)
+        self.log_dict(
+            {f"{stage}/{k}": float(v) for k, v in metrics.items() if not k.startswith("n_")}, on_epoch=True
+        )
 
     def on_train_epoch_end(self):
         self._epoch_metrics("train")
@@ -135,4 +220,19 @@ class SurrogateModule(L.LightningModule):
         self._epoch_metrics("test")
 
     def configure_optimizers(self):
-        return torch.optim.Adam(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+        optimizer = torch.optim.Adam(
+            self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
+        )
+        if self.hparams.lr_schedule == "constant":
+            return optimizer
+        # cosine: a fixed epoch budget replaces most of early stopping's patience (issue: fewer epochs)
+        total = max(1, int(self.trainer.max_epochs))
+        warmup = min(int(self.hparams.warmup_epochs), total - 1)
+
+        def factor(epoch: int) -> float:
+            if epoch < warmup:
+                return (epoch + 1) / (warmup + 1)
+            return 0.5 * (1.0 + np.cos(np.pi * (epoch - warmup) / max(1, total - warmup)))
+
+        scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}

@@ -31,6 +31,7 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings]:
     module.eval()
     graph = dict(bundle["graph"])
     graph["edge_features"] = tuple(graph["edge_features"])
+    graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
     return module, GraphSettings(**graph)
 
 

@@ -13,7 +13,8 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from rheograph.graphs.dataset import GraphSettings
-from rheograph.learn.module import TARGET_NAMES, physical_targets
+from rheograph.learn.baselines import baseline_predictions, dataset_arrays
+from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
 
 log = logging.getLogger("rheograph.train")
 
@@ -56,6 +57,7 @@ def ensure_dataset(cfg: DictConfig) -> None:
 def graph_settings(cfg: DictConfig) -> GraphSettings:
     values = OmegaConf.to_container(cfg.graph, resolve=True)
     values["edge_features"] = tuple(values["edge_features"])
+    values["graph_inputs"] = tuple(values.get("graph_inputs", ()))
     return GraphSettings(**values)
 
 
@@ -67,7 +69,11 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
             "format": "rheograph-surrogate-1",
             "state_dict": module.state_dict(),
             "hparams": hp,
-            "graph": {**settings.__dict__, "edge_features": list(settings.edge_features)},
+            "graph": {
+                **settings.__dict__,
+                "edge_features": list(settings.edge_features),
+                "graph_inputs": list(settings.graph_inputs),
+            },
             "fold": fold,
             "split": split,
         },
@@ -99,11 +105,13 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
         module = instantiate(
             cfg.model,
             edge_in=len(settings.edge_features),
+            global_in=len(settings.graph_inputs),
             viscosity_scale=settings.viscosity_scale,
             pressure_scale=settings.pressure_scale,
             _convert_="all",
         )
         module.set_target_scaling(dm.target_mean, dm.target_std)
+        module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
         callbacks = [instantiate(c) for c in cfg.callbacks.values()]
         logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
         trainer = instantiate(
@@ -123,9 +131,22 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
             raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
         test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
         pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
-        predictions.append(dict(fold=k, pred=pred, true=true, **meta))
+        fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
+        baselines = baseline_predictions(
+            dataset_arrays(dm.dataset, fitted),
+            dataset_arrays(dm.dataset, dm.test_idx),
+            settings.viscosity_scale,
+            settings.pressure_scale,
+        )
+        predictions.append(dict(fold=k, pred=pred, true=true, baselines=baselines, **meta))
         save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split)
         result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
+        groups = meta["phi"] * 1e6 + meta["stress"]
+        for name, value in fold_metrics(pred, true, groups).items():
+            result[f"test/{name}"] = value
+        for model_name, model_pred in baselines.items():
+            for name, value in fold_metrics(model_pred, true, groups).items():
+                result[f"baseline/{model_name}/{name}"] = value
         fold_results.append(result)
         if logger:
             logger.log_hyperparams(
@@ -178,6 +199,8 @@ def _stack_predictions(predictions) -> dict:
     out = {}
     for key in ("pred", "true", "stress", "phi", "run_id"):
         out[key] = np.concatenate([p[key] for p in predictions])
+    for name in predictions[0].get("baselines", {}):
+        out[f"baseline_{name}"] = np.concatenate([p["baselines"][name] for p in predictions])
     out["fold"] = np.concatenate([np.full(p["pred"].shape[0], p["fold"]) for p in predictions])
     out["targets"] = np.array(TARGET_NAMES)
     return out

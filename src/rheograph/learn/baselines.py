@@ -1,0 +1,99 @@
+"""Baselines scored on the same folds as the graph network, so every report shows what it adds.
+
+* ``stress_mean``: the training mean of each target at the snapshot's (phi, sigma) (knowing the imposed
+  stress and nothing else; its R^2 is the share of the variance that lies between state points).
+* ``descriptors``: gradient-boosted trees on the eight per-snapshot physics descriptors of
+  ``rheograph.graphs.features.DESCRIPTORS`` plus log(sigma/sigma0) (and phi when it varies) — a model
+  without message passing.
+* ``descriptors_ridge``: ridge regression on the descriptors alone (positions only, the seed paper's
+  information).
+
+All fit the transformed targets (asinh eta_r, asinh Pi, Z_mu) and return physical (G, 3) predictions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rheograph.learn.module import physical_targets
+
+BASELINES = ("stress_mean", "descriptors", "descriptors_ridge")
+
+
+def _state_points(phi: np.ndarray, stress: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(phi, dtype=np.float64), 6) * 1e6 + np.round(np.asarray(stress), 6)
+
+
+def stress_mean(train: dict, test: dict) -> np.ndarray:
+    """Transformed prediction (G, 3): the training mean at the same (phi, sigma); a state point absent
+    from training takes the mean of the nearest log(sigma) at the same phi (else the global mean)."""
+    keys = _state_points(train["phi"], train["stress"])
+    out = np.empty((len(test["stress"]), train["y"].shape[1]))
+    for g, (phi, sigma) in enumerate(zip(test["phi"], test["stress"])):
+        same = keys == _state_points(phi, sigma)
+        if not same.any():
+            at_phi = np.isclose(train["phi"], phi)
+            if at_phi.any():
+                dist = np.abs(np.log(train["stress"][at_phi]) - np.log(sigma))
+                nearest = train["stress"][at_phi][np.argmin(dist)]
+                same = at_phi & np.isclose(train["stress"], nearest)
+            else:
+                same = np.ones_like(keys, dtype=bool)
+        out[g] = train["y"][same].mean(axis=0)
+    return out
+
+
+def _inputs(data: dict, with_conditions: bool, vary_phi: bool) -> np.ndarray:
+    columns = [data["descriptors"]]
+    if with_conditions:
+        columns.append(np.log(data["stress"])[:, None])
+        if vary_phi:
+            columns.append(np.asarray(data["phi"])[:, None])
+    return np.concatenate(columns, axis=1)
+
+
+def descriptor_trees(train: dict, test: dict, seed: int = 0) -> np.ndarray:
+    from sklearn.ensemble import HistGradientBoostingRegressor
+
+    vary_phi = np.unique(np.round(train["phi"], 6)).size > 1
+    x_train, x_test = _inputs(train, True, vary_phi), _inputs(test, True, vary_phi)
+    out = np.empty((x_test.shape[0], train["y"].shape[1]))
+    for k in range(train["y"].shape[1]):
+        model = HistGradientBoostingRegressor(max_iter=300, learning_rate=0.05, random_state=seed)
+        out[:, k] = model.fit(x_train, train["y"][:, k]).predict(x_test)
+    return out
+
+
+def descriptor_ridge(train: dict, test: dict, alpha: float = 1e-3) -> np.ndarray:
+    x_train, x_test = _inputs(train, False, False), _inputs(test, False, False)
+    mean, std = x_train.mean(axis=0), x_train.std(axis=0) + 1e-12
+    a = np.c_[(x_train - mean) / std, np.ones(len(x_train))]
+    b = np.c_[(x_test - mean) / std, np.ones(len(x_test))]
+    reg = alpha * len(a) * np.eye(a.shape[1])
+    reg[-1, -1] = 0.0  # the intercept is not penalised
+    coef = np.linalg.solve(a.T @ a + reg, a.T @ train["y"])
+    return b @ coef
+
+
+def baseline_predictions(train: dict, test: dict, viscosity_scale: float, pressure_scale: float) -> dict:
+    """Physical predictions (G_test, 3) of every baseline.  ``train``/``test``: dicts of arrays
+    ``y`` (transformed targets, (G, 3)), ``descriptors`` (G, 8), ``stress`` (G,), ``phi`` (G,)."""
+    raw = {
+        "stress_mean": stress_mean(train, test),
+        "descriptors": descriptor_trees(train, test),
+        "descriptors_ridge": descriptor_ridge(train, test),
+    }
+    return {name: physical_targets(pred, viscosity_scale, pressure_scale) for name, pred in raw.items()}
+
+
+def dataset_arrays(dataset, index) -> dict:
+    """The arrays baselines need, for graphs ``index`` of a SnapshotGraphDataset."""
+    import torch
+
+    index = torch.as_tensor(np.asarray(index))
+    return {
+        "y": dataset.y[index].double().numpy(),
+        "descriptors": dataset.descriptors[index].numpy(),
+        "stress": dataset.stress[index].numpy(),
+        "phi": dataset.phi[index].numpy(),
+    }
