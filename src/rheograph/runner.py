@@ -113,6 +113,7 @@ def run_state_point(
             if status != "diverged":  # never overwrite the last good checkpoint with a diverged state
                 loop.save()
             summary = _summary(traj, params, status, sim.state.strain)
+            summary["cpu_seconds"] = loop.cpu_seconds()
             traj.finish(status, summary)  # partial runs get a summary too; their status says so
     finally:
         loop.bar.close()
@@ -138,6 +139,10 @@ class _RunLoop:
         self.jam_window = [tuple(w) for w in counters.get("jam_window", [])]
         self.stall_time = params.output_interval * params.jam_viscosity / params.stress
         self.start = wallclock.time()
+        # CPU seconds of the run over all invocations, up to the last checkpoint (a killed invocation's
+        # work after its last checkpoint is redone and counted once, as it is recomputed)
+        self.cpu_before = float(counters.get("cpu_seconds", 0.0))
+        self.cpu_start = wallclock.process_time()
         self.bar = tqdm(
             total=params.strain,
             initial=round(sim.state.strain, 4),
@@ -156,8 +161,12 @@ class _RunLoop:
                 last_row_time=self.last_row_time,
                 last_row_strain=self.last_row_strain,
                 jam_window=self.jam_window,
+                cpu_seconds=self.cpu_seconds(),
             ),
         )
+
+    def cpu_seconds(self) -> float:
+        return self.cpu_before + wallclock.process_time() - self.cpu_start
 
     def stalled(self) -> bool:
         if len(self.jam_window) < self.params.jam_intervals:
