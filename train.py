@@ -5,11 +5,13 @@ import hydra
 from omegaconf import DictConfig
 
 from rheograph.cli import train_main
+from rheograph.errors import one_line_errors
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float:
-    return train_main(cfg)
+    with one_line_errors("train.py"):
+        return train_main(cfg)
 
 
 if __name__ == "__main__":

@@ -4,11 +4,13 @@ import hydra
 from omegaconf import DictConfig
 
 from rheograph.cli import tune_main
+from rheograph.errors import one_line_errors
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="tune")
 def main(cfg: DictConfig) -> None:
-    tune_main(cfg)
+    with one_line_errors("tune.py"):
+        tune_main(cfg)
 
 
 if __name__ == "__main__":

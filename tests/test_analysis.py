@@ -102,3 +102,31 @@ def test_jammed_state_points_report_the_static_packing_not_a_viscosity():
     assert np.isnan(point["viscosity"])
     assert 2.0 < point["pressure"] / point["stress"] < 2.2  # Pi_2D / sigma ~ 3.1, near isostatic packing
     assert 2.5 < point["z_mu"] < 3.0
+
+
+def test_decorrelation_strain_of_an_ar1_process_matches_its_closed_form():
+    """AR(1) x_{k+1} = rho x_k + noise has autocorrelation rho^k: it crosses 1/e at lag -1/ln(rho)."""
+    from rheograph.analysis import decorrelation_strain
+
+    rng = np.random.default_rng(0)
+    rho, n, step = 0.9, 200_000, 0.01
+    x = np.empty(n)
+    x[0] = 0.0
+    noise = rng.normal(size=n)
+    for k in range(1, n):
+        x[k] = rho * x[k - 1] + noise[k]
+    expected = -step / np.log(rho)  # 0.0949 strain
+    assert abs(decorrelation_strain(x, step) - expected) < 0.05 * expected
+    assert np.isnan(decorrelation_strain(np.ones(50), step))
+
+
+def test_transient_strain_finds_the_end_of_a_relaxation():
+    from rheograph.analysis import transient_strain
+
+    rng = np.random.default_rng(1)
+    strain = np.arange(0.0, 3.0, 0.01)
+    values = 1.0 + 5.0 * np.exp(-strain / 0.1) + 0.05 * rng.normal(size=strain.size)
+    t = transient_strain(strain, values, steady_from=1.0)
+    # 5 exp(-s/0.1) drops below the 2-sigma band of 0.1-strain block means (~0.03) near s ~ 0.5
+    assert 0.3 <= t <= 0.7
+    assert transient_strain(strain, 1.0 + 0.05 * rng.normal(size=strain.size), 1.0) <= 0.3

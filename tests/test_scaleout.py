@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rheograph.collect import build_index, index_files
+from rheograph.collect import build_index, index_files, write_index
 from rheograph.learn.datamodule import expand_files
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +37,9 @@ def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path
     assert len(index["runs"]) == 2 and len(index["skipped"]) == 1
     assert all(e["status"] == "completed" and e["snapshots"] == 3 for e in index["runs"])
     path = tmp_path / "index.json"
-    path.write_text(json.dumps(index))
+    write_index(index, path)
+    # stored relative to the index (a committed index stays valid in any clone), read back absolute
+    assert all(not Path(e["path"]).is_absolute() for e in json.loads(path.read_text())["runs"])
     assert index_files(path) == [str(f.resolve()) for f in files]
     assert expand_files(str(path)) == sorted(str(f.resolve()) for f in files)
 

@@ -65,3 +65,45 @@ def read_lfdem_data(path) -> dict:
         "z_mu": table[:, 18],
         "dt": table[:, 22],
     }
+
+
+def decorrelation_strain(values, strain_step: float) -> float:
+    """Strain over which the normalised autocorrelation of an evenly sampled series first drops below
+    1/e (the integral-free, noise-robust choice), linearly interpolated between samples.
+
+    ``values`` (R,) sampled every ``strain_step``; returns NaN for fewer than 8 samples or a constant
+    series, and the whole span when the correlation never drops below 1/e (not decorrelated)."""
+    x = np.asarray(values, dtype=np.float64)
+    x = x[np.isfinite(x)]
+    if x.size < 8 or np.ptp(x) == 0.0:
+        return float("nan")
+    x = x - x.mean()
+    n = x.size
+    spectrum = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
+    acf /= acf[0]
+    below = np.flatnonzero(acf < np.exp(-1.0))
+    if below.size == 0:
+        return float(n * strain_step)
+    k = int(below[0])
+    # interpolate between lag k-1 (above 1/e) and k (below)
+    frac = (acf[k - 1] - np.exp(-1.0)) / (acf[k - 1] - acf[k])
+    return float((k - 1 + frac) * strain_step)
+
+
+def transient_strain(strain, values, steady_from: float, block: float = 0.1) -> float:
+    """Start-up transient: the first strain from which every ``block``-strain block mean of ``values``
+    stays within 2 standard deviations of the block means of the steady window (strain >= steady_from).
+
+    Returns NaN when the steady window holds fewer than 3 blocks."""
+    strain, values = np.asarray(strain, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    edges = np.arange(0.0, strain.max() + block, block)
+    idx = np.digitize(strain, edges) - 1
+    means = np.array([values[idx == b].mean() if np.any(idx == b) else np.nan for b in range(edges.size)])
+    steady = means[edges >= steady_from]
+    steady = steady[np.isfinite(steady)]
+    if steady.size < 3:
+        return float("nan")
+    centre, spread = steady.mean(), 2.0 * steady.std(ddof=1)
+    outside = np.flatnonzero(np.isfinite(means) & (np.abs(means - centre) > spread) & (edges < steady_from))
+    return float(edges[outside[-1]] + block) if outside.size else 0.0

@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import h5py
 
+from rheograph.errors import InputError, one_line_errors
 from rheograph.io.hdf5 import PRODUCER, read_run_info
 
 USABLE = ("completed", "jammed")
@@ -47,12 +49,37 @@ def build_index(directories) -> dict:
     return {"format": "rheograph-index-1", "runs": entries, "skipped": skipped}
 
 
+def write_index(index: dict, path: str | Path) -> None:
+    """Write ``index`` with paths relative to the index file, so that a committed index stays valid in
+    any clone."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    base = path.parent.resolve()
+    relative = {
+        **index,
+        "runs": [{**e, "path": os.path.relpath(e["path"], base)} for e in index["runs"]],
+        "skipped": [{**e, "path": os.path.relpath(e["path"], base)} for e in index["skipped"]],
+    }
+    path.write_text(json.dumps(relative, indent=1))
+
+
+def read_index(path: str | Path) -> dict:
+    """An index written by :func:`write_index`, its paths resolved against the index's directory."""
+    path = Path(path)
+    try:
+        index = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not a readable rheograph index ({exc})") from exc
+    if not isinstance(index, dict) or index.get("format") != "rheograph-index-1":
+        raise InputError(f"{path}: not a rheograph index")
+    for entry in index["runs"]:
+        entry["path"] = str((path.parent / entry["path"]).resolve())
+    return index
+
+
 def index_files(path: str | Path) -> list[str]:
-    """Usable trajectory files listed in an index written by :func:`build_index`."""
-    index = json.loads(Path(path).read_text())
-    if index.get("format") != "rheograph-index-1":
-        raise ValueError(f"{path}: not a rheograph index")
-    return [e["path"] for e in index["runs"] if e["status"] in USABLE]
+    """Usable trajectory files listed in an index written by :func:`write_index`."""
+    return [e["path"] for e in read_index(path)["runs"] if e["status"] in USABLE]
 
 
 def main(argv=None) -> None:
@@ -60,9 +87,11 @@ def main(argv=None) -> None:
     ap.add_argument("directories", nargs="+")
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
+    missing = [d for d in args.directories if not Path(d).is_dir()]
+    if missing:
+        raise InputError(f"directory {missing[0]} does not exist")
     index = build_index(args.directories)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(index, indent=1))
+    write_index(index, args.out)
     usable = sum(e["status"] in USABLE for e in index["runs"])
     print(f"{len(index['runs'])} runs ({usable} usable), {len(index['skipped'])} skipped -> {args.out}")
     for s in index["skipped"]:
@@ -70,4 +99,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with one_line_errors("python -m rheograph.collect"):
+        main()

@@ -21,6 +21,7 @@ import h5py
 import numpy as np
 
 from rheograph.analysis import read_lfdem_data, steady_state_summary
+from rheograph.errors import one_line_errors
 from rheograph.io.hdf5 import read_run_info, read_timeseries
 from rheograph.sim.params import scheme_name
 
@@ -239,4 +240,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with one_line_errors("python -m rheograph.flowcurve"):
+        main()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 import torch
 from torch_geometric.data import Data, InMemoryDataset
 
+from rheograph.errors import InputError
 from rheograph.graphs.features import (
     EDGE_FEATURES,
     GRAPH_INPUTS,
@@ -25,6 +27,7 @@ from rheograph.graphs.features import (
 from rheograph.io.hdf5 import SCHEMA_VERSION
 
 TARGETS = ("viscosity", "pressure", "z_mu")
+log = logging.getLogger("rheograph.graphs")
 
 
 @dataclass(frozen=True)
@@ -40,21 +43,21 @@ class GraphSettings:
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
-            raise ValueError(f"graph.cutoff={self.cutoff} is invalid: allowed 0 < cutoff <= 5 (units of a)")
+            raise InputError(f"graph.cutoff={self.cutoff} is invalid: allowed 0 < cutoff <= 5 (units of a)")
         unknown = set(self.edge_features) - set(EDGE_FEATURES)
         if unknown or not self.edge_features:
-            raise ValueError(
+            raise InputError(
                 f"graph.edge_features={list(self.edge_features)}: allowed a non-empty subset "
                 f"of {list(EDGE_FEATURES)}"
             )
         unknown = set(self.graph_inputs) - set(GRAPH_INPUTS)
         if unknown:
-            raise ValueError(
+            raise InputError(
                 f"graph.graph_inputs={list(self.graph_inputs)}: allowed a subset of {list(GRAPH_INPUTS)}"
             )
         for name in ("viscosity_scale", "pressure_scale"):
             if getattr(self, name) <= 0:
-                raise ValueError(f"graph.{name} must be > 0")
+                raise InputError(f"graph.{name} must be > 0")
 
     def transform_targets(self, eta, pressure, z_mu) -> np.ndarray:
         return np.stack(
@@ -69,12 +72,20 @@ class GraphSettings:
 
 def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> list[Data]:
     """Graphs of every snapshot (strain >= min_strain, finite targets) of one trajectory file."""
-    with h5py.File(path, "r") as h5:
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(
+            f"{path}: cannot be opened as HDF5 ({exc}); if a simulation is still writing it, wait or train "
+            "on a sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun "
+            "that state point"
+        ) from exc
+    with h5:
         if (
             h5.attrs.get("producer") != "rheograph"
             or int(h5.attrs.get("schema_version", -1)) != SCHEMA_VERSION
         ):
-            raise ValueError(f"{path}: not a rheograph trajectory of schema {SCHEMA_VERSION}")
+            raise InputError(f"{path}: not a rheograph trajectory of schema {SCHEMA_VERSION}")
         params = json.loads(h5.attrs["params"])
         status = str(h5.attrs.get("status", ""))
         lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
@@ -131,7 +142,7 @@ class SnapshotGraphDataset(InMemoryDataset):
     def __init__(self, files, settings: GraphSettings, cache_dir: str | Path):
         self.files = sorted(str(f) for f in files)
         if not self.files:
-            raise FileNotFoundError("no trajectory files given to the graph dataset")
+            raise InputError("no trajectory files given to the graph dataset")
         self.settings = settings
         key = json.dumps(
             {
@@ -145,7 +156,13 @@ class SnapshotGraphDataset(InMemoryDataset):
         )
         self.digest = hashlib.sha1(key.encode()).hexdigest()[:16]
         super().__init__(root=str(Path(cache_dir) / self.digest))
-        self.load(self.processed_paths[0])
+        try:
+            self.load(self.processed_paths[0])
+        except Exception as exc:  # a truncated or corrupt cache entry (e.g. a killed build): rebuild it
+            log.warning("graph cache %s unreadable (%s): rebuilding", self.processed_paths[0], exc)
+            Path(self.processed_paths[0]).unlink(missing_ok=True)
+            self.process()
+            self.load(self.processed_paths[0])
 
     @property
     def raw_file_names(self):
@@ -163,6 +180,6 @@ class SnapshotGraphDataset(InMemoryDataset):
         for run_id, path in enumerate(self.files):
             graphs.extend(snapshot_graphs(path, self.settings, run_id))
         if not graphs:
-            raise ValueError(f"no snapshots with strain >= {self.settings.min_strain} in {self.files}")
+            raise InputError(f"no snapshots with strain >= {self.settings.min_strain} in {self.files}")
         self.save(graphs, self.processed_paths[0])
         Path(self.root, "files.json").write_text(json.dumps(self.files, indent=1))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rheograph.errors import InputError
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
 
 PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
@@ -144,7 +145,7 @@ def node_features(radii, size_ratio):
     large = np.isclose(radii, size_ratio)
     small = np.isclose(radii, 1.0)
     if not np.all(large | small):
-        raise ValueError(
+        raise InputError(
             f"radii must be 1 or size_ratio={size_ratio} for the one-hot node features "
             f"(found {np.unique(np.round(radii[~(large | small)], 6))[:5].tolist()})"
         )

@@ -21,6 +21,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rheograph.errors import InputError
 from rheograph.sim.integrator import SimState
 from rheograph.sim.params import SimParams
 
@@ -47,7 +48,7 @@ SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "p
 RESUMABLE_PARAMS = {"strain", "max_wall_seconds", "checkpoint_wall_seconds", "jam_intervals"}
 
 
-class TrajectoryFileError(RuntimeError):
+class TrajectoryFileError(InputError):
     """A trajectory file is corrupt, foreign, or belongs to another state point."""
 
 

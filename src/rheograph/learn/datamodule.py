@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from torch_geometric.loader import DataLoader
 
+from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
 
 SPLITS = ("random", "grouped")
@@ -46,7 +47,7 @@ def kfold_assignment(
         return folds
     unique = np.unique(groups)
     if unique.size < num_folds:
-        raise ValueError(f"grouped split needs at least num_folds={num_folds} runs, got {unique.size}")
+        raise InputError(f"grouped split needs at least num_folds={num_folds} runs, got {unique.size}")
     if strata is not None:
         stratum_of = {g: strata[np.flatnonzero(groups == g)[0]] for g in unique}
         fold_of, next_fold = {}, int(rng.integers(num_folds))
@@ -84,13 +85,13 @@ class SnapshotDataModule(L.LightningDataModule):
     ):
         super().__init__()
         if split not in SPLITS:
-            raise ValueError(f"data.split={split!r} is invalid: allowed {SPLITS}")
+            raise InputError(f"data.split={split!r} is invalid: allowed {SPLITS}")
         if not 2 <= num_folds <= 20:
-            raise ValueError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
+            raise InputError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
         if not 0 <= fold < num_folds:
-            raise ValueError(f"data.fold={fold} is invalid: allowed 0..{num_folds - 1}")
+            raise InputError(f"data.fold={fold} is invalid: allowed 0..{num_folds - 1}")
         if batch_size < 1:
-            raise ValueError(f"data.batch_size={batch_size} is invalid: allowed >= 1")
+            raise InputError(f"data.batch_size={batch_size} is invalid: allowed >= 1")
         self.files = expand_files(files)
         self.graph = graph if isinstance(graph, GraphSettings) else GraphSettings(**(graph or {}))
         self.cache_dir, self.fold, self.num_folds = cache_dir, fold, num_folds
@@ -101,12 +102,13 @@ class SnapshotDataModule(L.LightningDataModule):
     def setup(self, stage=None):
         if self.dataset is not None:
             return
+        if self.phi is not None:  # per-phi model out of a pooled file list: other files are never read
+            files = [f for f in self.files if np.isclose(trajectory_phi(f), self.phi)]
+            if not files:
+                raise InputError(f"data.phi={self.phi}: no trajectory at this area fraction in data.files")
+            self.files = files
         dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir)
         index = np.arange(len(dataset))
-        if self.phi is not None:  # per-phi model out of a pooled file list
-            index = index[np.isclose(dataset.phi.numpy(), self.phi)]
-            if index.size == 0:
-                raise ValueError(f"data.phi={self.phi}: no snapshots at this area fraction")
         groups, strata = None, None
         if self.split == "grouped":
             groups = dataset.run_id.numpy()[index]
@@ -161,6 +163,20 @@ class SnapshotDataModule(L.LightningDataModule):
         return self._loader(self.test_idx, False)
 
 
+def trajectory_phi(path: str) -> float:
+    """Area fraction of a trajectory file (its ``param_phi`` attribute)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            return float(h5.attrs["param_phi"])
+    except (OSError, KeyError) as exc:
+        raise InputError(
+            f"{path}: cannot read its area fraction ({exc}); a file still being written by a simulation "
+            "is locked — train on a sweep index (python -m rheograph.collect) that lists finished runs only"
+        ) from exc
+
+
 def expand_files(files) -> list[str]:
     """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.collect``) into a sorted list."""
     from rheograph.collect import index_files
@@ -174,5 +190,5 @@ def expand_files(files) -> list[str]:
             out.update(glob.glob(str(pattern), recursive=True))
     out = sorted(out)
     if not out:
-        raise FileNotFoundError(f"data.files={patterns} matches no trajectory file")
+        raise InputError(f"data.files={patterns} matches no trajectory file")
     return out

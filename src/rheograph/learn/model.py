@@ -6,6 +6,8 @@ import torch
 from torch import nn
 from torch_geometric.nn import DeepGCNLayer, GENConv, global_add_pool, global_max_pool, global_mean_pool
 
+from rheograph.errors import InputError
+
 
 def _area_pool(x, batch, area):
     """Sum over the particles of a graph divided by its box area: an intensive, stress-like readout
@@ -48,13 +50,13 @@ class ResGCN(nn.Module):
     ):
         super().__init__()
         if block not in BLOCKS:
-            raise ValueError(f"model.block={block!r} is invalid: allowed {BLOCKS}")
+            raise InputError(f"model.block={block!r} is invalid: allowed {BLOCKS}")
         if pool not in POOLS:
-            raise ValueError(f"model.pool={pool!r} is invalid: allowed {sorted(POOLS)}")
+            raise InputError(f"model.pool={pool!r} is invalid: allowed {sorted(POOLS)}")
         if aggr not in AGGRS:
-            raise ValueError(f"model.aggr={aggr!r} is invalid: allowed {AGGRS}")
+            raise InputError(f"model.aggr={aggr!r} is invalid: allowed {AGGRS}")
         if num_layers < 1 or hidden < 1 or head_layers < 1:
-            raise ValueError("model.num_layers, model.hidden and model.head_layers must be >= 1")
+            raise InputError("model.num_layers, model.hidden and model.head_layers must be >= 1")
         self.block, self.pool_name, self.global_in = block, pool, global_in
         self.node_encoder = nn.Linear(node_in, hidden)
         self.edge_encoder = nn.Linear(edge_in, hidden)

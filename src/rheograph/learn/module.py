@@ -7,6 +7,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from rheograph.errors import InputError
 from rheograph.graphs.features import inverse_transform
 from rheograph.learn.model import ResGCN
 
@@ -124,13 +125,13 @@ class SurrogateModule(L.LightningModule):
         super().__init__()
         self.save_hyperparameters()
         if lr <= 0:
-            raise ValueError(f"model.lr={lr} is invalid: allowed > 0")
+            raise InputError(f"model.lr={lr} is invalid: allowed > 0")
         if lr_schedule not in LR_SCHEDULES:
-            raise ValueError(f"model.lr_schedule={lr_schedule!r} is invalid: allowed {LR_SCHEDULES}")
+            raise InputError(f"model.lr_schedule={lr_schedule!r} is invalid: allowed {LR_SCHEDULES}")
         if warmup_epochs < 0:
-            raise ValueError(f"model.warmup_epochs={warmup_epochs} is invalid: allowed >= 0")
+            raise InputError(f"model.warmup_epochs={warmup_epochs} is invalid: allowed >= 0")
         if len(loss_weights) != 3 or min(loss_weights) < 0:
-            raise ValueError(f"model.loss_weights={list(loss_weights)}: three weights >= 0")
+            raise InputError(f"model.loss_weights={list(loss_weights)}: three weights >= 0")
         self.net = ResGCN(
             node_in,
             edge_in,

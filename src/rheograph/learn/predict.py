@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rheograph.errors import InputError, one_line_errors
 from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
 from rheograph.learn.module import TARGET_NAMES, SurrogateModule
 from rheograph.learn.train import predict_dataset
@@ -25,7 +26,7 @@ BUNDLE_FORMAT = "rheograph-surrogate-1"
 def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings]:
     bundle = torch.load(path, map_location="cpu", weights_only=True)
     if not isinstance(bundle, dict) or bundle.get("format") != BUNDLE_FORMAT:
-        raise ValueError(f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT})")
+        raise InputError(f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT})")
     module = SurrogateModule(**bundle["hparams"])
     module.load_state_dict(bundle["state_dict"])
     module.eval()
@@ -39,10 +40,10 @@ def predict_file(model_paths, trajectory: str | Path) -> dict:
     """Ensemble prediction for all snapshots of ``trajectory``: arrays (S,) per column."""
     models = [load_bundle(p) for p in sorted(model_paths)]
     if not models:
-        raise FileNotFoundError("no model bundles (fold*.pt) given")
+        raise InputError("no model bundles (fold*.pt) given")
     settings = dataclasses.replace(models[0][1], min_strain=0.0)
     if any(dataclasses.replace(s, min_strain=0.0) != settings for _, s in models):
-        raise ValueError("the model bundles were trained with different graph settings")
+        raise InputError("the model bundles were trained with different graph settings")
     graphs = snapshot_graphs(trajectory, settings, run_id=0)
     preds = []
     for module, _ in models:
@@ -91,4 +92,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with one_line_errors("predict.py"):
+        main()

@@ -17,6 +17,7 @@ import optuna
 from hydra import compose
 from omegaconf import DictConfig, OmegaConf
 
+from rheograph.errors import InputError
 from rheograph.learn.train import train_folds
 
 log = logging.getLogger("rheograph.tune")
@@ -36,7 +37,7 @@ def suggest(trial: optuna.Trial, name: str, spec: dict):
         return trial.suggest_float(
             name, spec["low"], spec["high"], step=spec.get("step"), log=spec.get("log", False)
         )
-    raise ValueError(f"search space entry {name}: unknown type {kind!r} (categorical, int, float)")
+    raise InputError(f"search space entry {name}: unknown type {kind!r} (categorical, int, float)")
 
 
 def _override(name: str, value) -> str:

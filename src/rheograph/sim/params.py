@@ -6,6 +6,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from rheograph.errors import InputError
+
 INTEGRATORS = ("euler", "implicit")
 LAGGED_SUFFIX = "-lagged"  # scheme label of LF_DEM's lagged step control
 
@@ -21,7 +23,7 @@ def scheme_settings(name: str) -> dict:
     return {"integrator": name.removesuffix(LAGGED_SUFFIX), "lagged_step_control": lagged}
 
 
-class ParameterError(ValueError):
+class ParameterError(InputError):
     """A simulation parameter is outside its allowed range."""
 
 

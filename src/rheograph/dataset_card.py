@@ -1,0 +1,314 @@
+"""Dataset card of a set of trajectory runs: counts, decorrelation, transient, cost, sizes, flow curves,
+and the seed paper's Fig. 2 (targets of every snapshot against sigma and shear rate) and Fig. 3
+(densities of eta_r and Pi against Z_mu, with marginals).
+
+    python -m rheograph.dataset_card data/paper --out docs --min-strain 1.0
+
+writes ``dataset.md`` (tables) and ``figures/dataset_fig2.png``, ``figures/dataset_fig3.png`` into --out,
+and ``index.json`` (``rheograph.collect``) into the data directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from collections import defaultdict
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rheograph.analysis import decorrelation_strain, transient_strain
+from rheograph.collect import build_index, write_index
+from rheograph.errors import InputError, one_line_errors
+from rheograph.flowcurve import collect
+
+TARGETS = ("viscosity", "pressure", "z_mu")
+
+
+def _log_cpu_seconds(run_dir: Path) -> float:
+    """Seconds reported by simulate.log over all invocations (files written before ``cpu_seconds``
+    existed; the runs are single-threaded, one per core, so wall time is CPU time)."""
+    log = run_dir / "simulate.log"
+    if not log.exists():
+        return float("nan")
+    return sum(float(m) for m in re.findall(r"steps, ([\d.]+) s\)", log.read_text()))
+
+
+def run_records(index: dict, min_strain: float) -> list[dict]:
+    """Per run: parameters, status, snapshot targets after ``min_strain``, decorrelation and transient
+    strains of the instantaneous eta_r (log), Pi and Z_mu, CPU seconds and file size."""
+    records = []
+    for entry in index["runs"]:
+        path = Path(entry["path"])
+        p = entry["params"]
+        with h5py.File(path, "r") as h5:
+            ts, sn = h5["timeseries"], h5["snapshots"]
+            strain = ts["strain"][()]
+            series = {
+                "viscosity": np.log(np.abs(ts["viscosity"][()]) + 1e-12),
+                "pressure": ts["pressure"][()],
+                "z_mu": ts["z_mu"][()],
+            }
+            snap_strain = sn["strain"][()]
+            keep = snap_strain >= min_strain
+            snaps = {k: sn[k][()][keep] for k in (*TARGETS, "shear_rate")}
+            cpu = float(h5["summary"].attrs.get("cpu_seconds", np.nan)) if "summary" in h5 else np.nan
+        if not np.isfinite(cpu):
+            cpu = _log_cpu_seconds(path.parent)
+        steady = strain >= p["steady_state_strain"]
+        flowing = entry["status"] != "jammed"
+        records.append(
+            dict(
+                path=str(path),
+                n=p["n_particles"],
+                phi=p["phi"],
+                stress=p["stress"],
+                seed=p["seed"],
+                status=entry["status"],
+                strain=entry["strain"],
+                snapshots=snaps,
+                n_snapshots=int(keep.sum()),
+                flowing=flowing,
+                decorrelation={
+                    k: decorrelation_strain(v[steady], p["output_interval"]) if flowing else np.nan
+                    for k, v in series.items()
+                },
+                transient=transient_strain(strain, series["viscosity"], p["steady_state_strain"])
+                if flowing
+                else np.nan,
+                cpu_seconds=cpu,
+                bytes=path.stat().st_size,
+            )
+        )
+    return records
+
+
+def _median(values) -> str:
+    v = np.array([x for x in values if np.isfinite(x)])
+    return f"{np.median(v):.3f} ({v.min():.3f}–{v.max():.3f})" if v.size else "–"
+
+
+def card_markdown(records: list[dict], points: list[dict], command: str, min_strain: float) -> str:
+    by_phi_n = defaultdict(list)
+    for r in records:
+        by_phi_n[(r["n"], r["phi"])].append(r)
+    lines = [
+        "# Dataset card",
+        "",
+        "Regenerate (resumable; finished state points are skipped):",
+        "",
+        "```bash",
+        command,
+        "```",
+        "",
+        f"Snapshots count from strain {min_strain:g} on (start-up transient skipped).  Shear-jammed runs "
+        "(status `jammed`) keep their snapshots, labelled jammed: their Π and Z_μ (the static packing "
+        "under load) are valid targets, their η_r is not.",
+        "",
+        "## Runs and snapshots per (N, φ)",
+        "",
+        "| N | φ | runs | seeds | completed | jammed | other | flowing snapshots | jammed snapshots "
+        "| CPU h | MB |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (n, phi), runs in sorted(by_phi_n.items()):
+        status = [r["status"] for r in runs]
+        lines.append(
+            f"| {n} | {phi:.2f} | {len(runs)} | {len({r['seed'] for r in runs})} "
+            f"| {status.count('completed')} | {status.count('jammed')} "
+            f"| {len(status) - status.count('completed') - status.count('jammed')} "
+            f"| {sum(r['n_snapshots'] for r in runs if r['flowing'])} "
+            f"| {sum(r['n_snapshots'] for r in runs if not r['flowing'])} "
+            f"| {np.nansum([r['cpu_seconds'] for r in runs]) / 3600:.2f} "
+            f"| {sum(r['bytes'] for r in runs) / 1e6:.1f} |"
+        )
+    total_bytes = sum(r["bytes"] for r in records)
+    lines += [
+        "",
+        f"{len(records)} runs, {sum(r['n_snapshots'] for r in records)} snapshots, "
+        f"{total_bytes / 1e6:.1f} MB in all.  CPU hours: process CPU time recorded in each file "
+        "(`summary/cpu_seconds`), or for older files the seconds in `simulate.log` (single-threaded runs).",
+        "",
+        "## Runs per state point (seeds finished / runs; J: jammed)",
+        "",
+    ]
+    stresses = sorted({r["stress"] for r in records})
+    for n in sorted({r["n"] for r in records}):
+        phis = sorted({r["phi"] for r in records if r["n"] == n})
+        lines += [
+            f"N = {n}:",
+            "",
+            "| σ/σ0 | " + " | ".join(f"φ = {phi:.2f}" for phi in phis) + " |",
+            "|---|" + "---|" * len(phis),
+        ]
+        for s in stresses:
+            cells = []
+            for phi in phis:
+                runs = [r for r in records if r["n"] == n and r["phi"] == phi and r["stress"] == s]
+                done = sum(r["status"] == "completed" for r in runs)
+                jam = sum(r["status"] == "jammed" for r in runs)
+                cells.append(f"{done}/{len(runs)}" + (f" J{jam}" if jam else "") if runs else "–")
+            lines.append(f"| {s:g} | " + " | ".join(cells) + " |")
+        lines.append("")
+    lines += [
+        "## Decorrelation and start-up transient (flowing runs)",
+        "",
+        "Decorrelation strain: where the autocorrelation of the instantaneous series (log η_r, Π, Z_μ; "
+        "rows every output interval, steady window) first drops below 1/e; median (min–max) over runs.  "
+        "Transient: the strain after which 0.1-strain block means of log η_r stay within 2 standard "
+        "deviations of the steady ones.",
+        "",
+        "| N | φ | decorrelation log η_r | decorrelation Π | decorrelation Z_μ | transient |",
+        "|---|---|---|---|---|---|",
+    ]
+    for (n, phi), runs in sorted(by_phi_n.items()):
+        lines.append(
+            f"| {n} | {phi:.2f} | "
+            + " | ".join(_median([r["decorrelation"][k] for r in runs]) for k in TARGETS)
+            + f" | {_median([r['transient'] for r in runs])} |"
+        )
+    jam_lines = []
+    for (n, phi), runs in sorted(by_phi_n.items()):
+        for seed in sorted({r["seed"] for r in runs}):
+            jammed = sorted(r["stress"] for r in runs if r["seed"] == seed and r["status"] == "jammed")
+            jam_lines.append(
+                f"| {n} | {phi:.2f} | {seed} | {jammed[0]:g} |"
+                if jammed
+                else f"| {n} | {phi:.2f} | {seed} | none up to {max(r['stress'] for r in runs):g} |"
+            )
+    lines += [
+        "",
+        "## Shear jamming: smallest jammed σ/σ0 per seed",
+        "",
+        "| N | φ | seed | smallest jammed σ/σ0 |",
+        "|---|---|---|---|",
+        *jam_lines,
+        "",
+        "## Flow curves (steady means over seeds ± standard error)",
+        "",
+        "| N | φ | σ/σ0 | seeds | η_r | Π / σ0 | Z_μ |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for pt in points:
+        cells = [
+            "jammed"
+            if (k == "viscosity" and pt["jammed"] and not np.isfinite(pt[k]))
+            else f"{pt[k]:.4g} ± {pt[k + '_se']:.2g}"
+            for k in TARGETS
+        ]
+        lines.append(
+            f"| {pt['n_particles']} | {pt['phi']:.2f} | {pt['stress']:g} | {pt['n_seeds']} | "
+            + " | ".join(cells)
+            + " |"
+        )
+    lines += [
+        "",
+        "## Figures",
+        "",
+        "Seed paper Fig. 2 (one point per snapshot; η_r against σ/σ0 and against γ̇/γ̇0, Π and Z_μ "
+        "against σ/σ0):",
+        "",
+        "![fig2](figures/dataset_fig2.png)",
+        "",
+        "Seed paper Fig. 3 (density of η_r and Π against Z_μ per φ, with marginals):",
+        "",
+        "![fig3](figures/dataset_fig3.png)",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def plot_fig2(records: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    phis = sorted({r["phi"] for r in records})
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(phis)))
+    fig, axes = plt.subplots(1, 4, figsize=(17, 4.2))
+    for phi, colour in zip(phis, colours):
+        runs = [r for r in records if r["phi"] == phi and r["flowing"] and r["n_snapshots"]]
+        if not runs:
+            continue
+        s = np.concatenate([np.full(r["n_snapshots"], r["stress"]) for r in runs])
+        jitter = np.exp(np.random.default_rng(0).normal(0, 0.03, s.size))
+        snap = {k: np.concatenate([r["snapshots"][k] for r in runs]) for k in (*TARGETS, "shear_rate")}
+        kw = dict(s=4, alpha=0.4, color=colour)
+        axes[0].scatter(s * jitter, snap["viscosity"], label=f"φ = {phi:.2f}", **kw)
+        axes[1].scatter(snap["shear_rate"], snap["viscosity"], **kw)
+        axes[2].scatter(s * jitter, snap["pressure"], **kw)
+        axes[3].scatter(s * jitter, snap["z_mu"], **kw)
+    labels = [("σ/σ0", "η_r"), ("γ̇/γ̇0", "η_r"), ("σ/σ0", "Π/σ0"), ("σ/σ0", "Z_μ")]
+    for ax, (xl, yl) in zip(axes, labels):
+        ax.set_xscale("log")
+        ax.set_xlabel(xl)
+        ax.set_ylabel(yl)
+        if yl != "Z_μ":
+            ax.set_yscale("log")
+    axes[0].legend(fontsize=8, markerscale=3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_fig3(records: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    phis = sorted({r["phi"] for r in records})
+    fig = plt.figure(figsize=(3.6 * len(phis), 7.2))
+    grid = fig.add_gridspec(4, len(phis), height_ratios=[1, 3, 1, 3], hspace=0.35, wspace=0.3)
+    for col, phi in enumerate(phis):
+        runs = [r for r in records if r["phi"] == phi and r["flowing"] and r["n_snapshots"]]
+        if not runs:
+            continue
+        z = np.concatenate([r["snapshots"]["z_mu"] for r in runs])
+        for row, key in ((1, "viscosity"), (3, "pressure")):
+            v = np.concatenate([r["snapshots"][key] for r in runs])
+            ok = v > 0
+            main = fig.add_subplot(grid[row, col])
+            top = fig.add_subplot(grid[row - 1, col], sharex=main)
+            main.hist2d(z[ok], np.log10(v[ok]), bins=30, cmap="magma_r")
+            top.hist(z[ok], bins=30, color="grey")
+            top.set_title(f"φ = {phi:.2f}" if row == 1 else "", fontsize=9)
+            top.tick_params(labelbottom=False)
+            main.set_xlabel("Z_μ")
+            main.set_ylabel("log10 η_r" if key == "viscosity" else "log10 Π/σ0")
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data", help="directory of trajectory runs (searched recursively)")
+    ap.add_argument("--out", required=True, help="directory for dataset.md and figures/")
+    ap.add_argument("--min-strain", type=float, default=1.0)
+    ap.add_argument(
+        "--command",
+        default="python simulate.py -m experiment=dataset_paper_n400",
+        help="the command that regenerates the set (quoted in the card)",
+    )
+    args = ap.parse_args(argv)
+    data, out = Path(args.data), Path(args.out)
+    if not data.is_dir():
+        raise InputError(f"data directory {data} does not exist")
+    index = build_index([data])
+    write_index(index, data / "index.json")
+    records = run_records(index, args.min_strain)
+    if not records:
+        raise InputError(f"no rheograph trajectory under {data}")
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    points = collect([data])
+    (out / "dataset.md").write_text(card_markdown(records, points, args.command, args.min_strain))
+    plot_fig2(records, out / "figures" / "dataset_fig2.png")
+    plot_fig3(records, out / "figures" / "dataset_fig3.png")
+    print(f"{len(records)} runs -> {out / 'dataset.md'}, {data / 'index.json'}")
+
+
+if __name__ == "__main__":
+    with one_line_errors("python -m rheograph.dataset_card"):
+        main()

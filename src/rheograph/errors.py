@@ -1,0 +1,27 @@
+"""The one error type for bad user input: a parameter out of range, a file that is not what it should be,
+a glob that matches nothing.  Its message names the key, value or file and what to do; entry points
+print it as one line and exit non-zero (``one_line_errors``)."""
+
+import os
+import sys
+from contextlib import contextmanager
+
+
+class InputError(ValueError):
+    """Bad input from the user (configuration, command line or file)."""
+
+
+@contextmanager
+def one_line_errors(program: str):
+    """Bad input (``InputError``, also when Hydra's instantiate wraps it) ends the program with one line
+    naming the problem and a non-zero status; ``HYDRA_FULL_ERROR=1`` or ``RHEOGRAPH_DEBUG=1`` re-raises
+    it with its traceback."""
+    try:
+        yield
+    except Exception as exc:
+        cause = exc
+        while cause is not None and not isinstance(cause, InputError):
+            cause = cause.__cause__
+        if cause is None or os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("RHEOGRAPH_DEBUG"):
+            raise
+        sys.exit(f"{program}: error: {cause}")

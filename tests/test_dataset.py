@@ -1,0 +1,81 @@
+"""The committed paper-scale dataset (data/paper, docs/dataset.md): its index matches the files, every
+flowing snapshot has finite targets, jammed runs are labelled, seeds are independent, counts hold."""
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from rheograph.collect import read_index
+
+ROOT = Path(__file__).resolve().parents[1]
+INDEX = ROOT / "data" / "paper" / "index.json"
+
+pytestmark = pytest.mark.skipif(not INDEX.exists(), reason="data/paper/index.json not committed")
+
+
+@pytest.fixture(scope="module")
+def index():
+    return read_index(INDEX)
+
+
+def test_index_lists_exactly_the_committed_runs(index):
+    listed = {Path(e["path"]).resolve() for e in index["runs"]}
+    on_disk = {p.resolve() for p in (ROOT / "data" / "paper").rglob("trajectory.h5")}
+    assert listed == on_disk and not index["skipped"]
+    for entry in index["runs"]:
+        assert entry["params"]["n_particles"] in (400, 2000)
+        assert entry["params"]["integrator"] == "implicit" and entry["params"]["disp_max"] == 2e-3
+
+
+def test_flowing_snapshots_have_finite_targets_and_jammed_runs_are_labelled(index):
+    for entry in index["runs"]:
+        with h5py.File(entry["path"], "r") as h5:
+            sn = h5["snapshots"]
+            keep = sn["strain"][()] >= 1.0
+            targets = np.stack([sn[k][()][keep] for k in ("viscosity", "pressure", "z_mu")], axis=1)
+            positions = sn["positions"]
+            assert positions.shape[1:] == (entry["params"]["n_particles"], 2)
+            if entry["status"] == "jammed":
+                assert not np.isfinite(h5["summary"].attrs["viscosity"])  # never averaged
+                assert np.isfinite(targets[:, 1:]).all()  # Pi and Z_mu of the packing remain valid
+            else:
+                assert entry["status"] == "completed", entry["path"]
+                assert np.isfinite(targets).all() and (targets[:, 2] >= 0).all()
+
+
+def test_seeds_are_independent_initial_configurations(index):
+    """Runs of one state point with different seeds start from different random packings."""
+    starts = defaultdict(dict)
+    for entry in index["runs"]:
+        p = entry["params"]
+        with h5py.File(entry["path"], "r") as h5:
+            starts[(p["n_particles"], p["phi"], p["stress"])][p["seed"]] = h5["snapshots/positions"][0]
+    multi = [s for s in starts.values() if len(s) > 1]
+    assert multi
+    for by_seed in multi:
+        seeds = sorted(by_seed)
+        for a, b in zip(seeds, seeds[1:]):
+            assert np.abs(by_seed[a] - by_seed[b]).max() > 1.0
+
+
+def test_each_complete_area_fraction_has_the_papers_snapshot_count(index):
+    """Where all ten stresses have three seeds at N = 400, there are >= 380 flowing snapshots."""
+    runs = defaultdict(list)
+    for entry in index["runs"]:
+        p = entry["params"]
+        if p["n_particles"] == 400:
+            runs[p["phi"]].append(entry)
+    complete = [phi for phi, e in runs.items() if len(e) >= 30]
+    assert complete, "no complete area fraction"
+    for phi in complete:
+        counts = 0
+        for entry in runs[phi]:
+            if entry["status"] != "jammed":
+                with h5py.File(entry["path"], "r") as h5:
+                    counts += int((h5["snapshots/strain"][()] >= 1.0).sum())
+        assert counts >= 380, (phi, counts)
+    assert json.loads(INDEX.read_text())["format"] == "rheograph-index-1"

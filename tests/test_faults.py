@@ -1,0 +1,121 @@
+"""Bad input at every entry point ends with one line naming the problem, a non-zero status and no
+traceback; corrupt files are recognised as such and never modified; a corrupt graph cache is rebuilt."""
+
+import hashlib
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(args, cwd):
+    done = subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+    return done.returncode, done.stdout + done.stderr
+
+
+def assert_one_line_error(code, output, *needles):
+    assert code != 0, output
+    assert "Traceback" not in output, output[-3000:]
+    error_lines = [line for line in output.splitlines() if "error:" in line]
+    assert len(error_lines) == 1, output[-3000:]
+    for needle in needles:
+        assert needle in error_lines[0], error_lines[0]
+
+
+def digest(path):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def test_train_with_a_glob_matching_nothing(tmp_path):
+    code, out = run(
+        [str(ROOT / "train.py"), f"data.files={tmp_path}/nothing*.h5", f"output_root={tmp_path}", "~logger"],
+        tmp_path,
+    )
+    assert_one_line_error(code, out, "train.py: error:", "data.files")
+
+
+def test_train_with_an_invalid_option_names_the_key(tmp_path, tiny_files):
+    code, out = run(
+        [
+            str(ROOT / "train.py"),
+            f"data.files={Path(tiny_files[0]).parent}/*.h5",
+            "data.phi=null",
+            "data.split=alphabetical",
+            f"output_root={tmp_path}",
+            "~logger",
+        ],
+        tmp_path,
+    )
+    assert_one_line_error(code, out, "data.split", "random")
+
+
+def test_train_on_a_truncated_trajectory_says_so_and_leaves_it_alone(tmp_path, tiny_files):
+    data = tmp_path / "data"
+    data.mkdir()
+    for f in tiny_files:
+        shutil.copy(f, data)
+    victim = data / Path(tiny_files[1]).name
+    victim.write_bytes(victim.read_bytes()[:20000])
+    before = digest(victim)
+    code, out = run(
+        [
+            str(ROOT / "train.py"),
+            f"data.files={data}/*.h5",
+            "data.phi=null",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            f"output_root={tmp_path}",
+            "~logger",
+        ],
+        tmp_path,
+    )
+    assert_one_line_error(code, out, victim.name, "truncated or corrupt", "move it aside")
+    assert digest(victim) == before
+
+
+def test_predict_on_a_file_that_is_not_hdf5(tmp_path):
+    garbage = tmp_path / "notes.h5"
+    garbage.write_text("this is not a trajectory")
+    bundle_dir = tmp_path / "models"
+    bundle_dir.mkdir()
+    code, out = run(
+        [str(ROOT / "predict.py"), "--models", str(bundle_dir), "--input", str(garbage), "--out", "x.csv"],
+        tmp_path,
+    )
+    assert_one_line_error(code, out, "predict.py: error:")
+    assert garbage.read_text() == "this is not a trajectory"
+
+
+def test_collect_and_flowcurve_refuse_missing_directories(tmp_path):
+    code, out = run(["-m", "rheograph.collect", str(tmp_path / "absent"), "--out", "i.json"], tmp_path)
+    assert_one_line_error(code, out, "absent", "does not exist")
+    code, out = run(["-m", "rheograph.dataset_card", str(tmp_path / "absent"), "--out", "d"], tmp_path)
+    assert_one_line_error(code, out, "absent", "does not exist")
+
+
+def test_a_corrupt_graph_cache_entry_is_rebuilt(tiny_files, tmp_path):
+    settings = GraphSettings(min_strain=0.05)
+    first = SnapshotGraphDataset(tiny_files, settings, tmp_path)
+    cached = Path(first.processed_paths[0])
+    cached.write_bytes(cached.read_bytes()[:100])  # e.g. a build killed mid-write
+    again = SnapshotGraphDataset(tiny_files, settings, tmp_path)
+    assert len(again) == len(first)
+    assert (again[0].edge_attr == first[0].edge_attr).all()
+
+
+def test_debug_flag_shows_the_traceback(tmp_path):
+    import os
+
+    env = {**os.environ, "RHEOGRAPH_DEBUG": "1"}
+    done = subprocess.run(
+        [sys.executable, "-m", "rheograph.collect", str(tmp_path / "absent"), "--out", "i.json"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+        timeout=120,
+    )
+    assert done.returncode != 0 and "Traceback" in done.stderr
