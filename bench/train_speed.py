@@ -69,7 +69,7 @@ def build_graphs(n_graphs, n_particles, cutoff):
     for k in range(n_graphs):
         pos, radii = configs[k % len(configs)]
         t0 = time.perf_counter()
-        edge_index, feats = snapshot_edges(pos, radii, box, box, 0.37 * k, cutoff)
+        edge_index, feats, _ = snapshot_edges(pos, radii, box, box, 0.37 * k, cutoff, params.to_dict())
         edge_attr = np.stack([feats[f] for f in ("gap", "distance", "dx", "dy", "sin", "cos")], axis=1)
         times.append(time.perf_counter() - t0)
         graphs.append(

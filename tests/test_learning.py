@@ -265,3 +265,33 @@ def test_batched_graphs_predict_one_row_per_graph(tiny_files):
     batch = Batch.from_data_list(graphs)
     out = ResGCN(2, 6, hidden=8).eval()(batch.x, batch.edge_index, batch.edge_attr, batch.batch)
     assert out.shape == (4, 3)
+
+
+def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
+    """Rerunning into the same run directory (what a killed train.py does with hydra.run.dir=<run>) keeps
+    finished folds untouched and trains only the rest; another configuration is refused."""
+    from rheograph.errors import InputError
+    from rheograph.learn.train import train_folds
+
+    pattern = str(Path(tiny_files[0]).parent / "*.h5")
+    base = [
+        f"data.files={pattern}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.phi=null",
+        "data.split=random",
+        "data.num_folds=3",
+        "graph.min_strain=0.05",
+        "trainer.max_epochs=3",
+        "~logger",
+        "trainer.enable_progress_bar=false",
+        "model.hidden=8",
+    ]
+    run_dir = tmp_path / "run"
+    train_folds(compose_train([*base, "fold=1", "report=false"]), run_dir)  # then "killed"
+    first = (run_dir / "fold1.pt").stat().st_mtime_ns, (run_dir / "fold1_result.json").read_text()
+    summary = train_folds(compose_train(base), run_dir)
+    assert ((run_dir / "fold1.pt").stat().st_mtime_ns, (run_dir / "fold1_result.json").read_text()) == first
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert [f["fold"] for f in metrics["folds"]] == [0, 1, 2] and np.isfinite(summary["val/loss"])
+    with pytest.raises(InputError, match="another configuration"):
+        train_folds(compose_train([*base, "model.hidden=16"]), run_dir)

@@ -12,6 +12,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
@@ -90,14 +91,22 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
     import lightning as L
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    torch.set_num_threads(max(1, min(2, os.cpu_count() or 1)))
+    threads = int(cfg.get("threads") or 0) or max(1, min(2, os.cpu_count() or 1))
+    torch.set_num_threads(threads)
     ensure_dataset(cfg)
     settings = graph_settings(cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
+    check_resumable(cfg, run_dir)
     num_folds = int(cfg.data.num_folds)
     folds = range(num_folds) if cfg.get("fold") is None else [int(cfg.fold)]
     fold_results, predictions = [], []
     for k in folds:
+        finished = load_finished_fold(run_dir, k)
+        if finished is not None:  # a resumed run keeps the folds it finished before
+            log.info("fold %d finished in an earlier invocation: kept", k)
+            fold_results.append(finished[0])
+            predictions.append(finished[1])
+            continue
         L.seed_everything(int(cfg.seed) + k, workers=True)
         dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
         dm.setup()
@@ -148,6 +157,7 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
             for name, value in fold_metrics(model_pred, true, groups).items():
                 result[f"baseline/{model_name}/{name}"] = value
         fold_results.append(result)
+        save_finished_fold(run_dir, k, result, predictions[-1])
         if logger:
             logger.log_hyperparams(
                 _flat_hparams(cfg),
@@ -171,6 +181,51 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
 
         write_report(run_dir, fold_results, predictions, split=cfg.data.split)
     return summary
+
+
+def _config_fingerprint(cfg: DictConfig) -> str:
+    """Hash of everything that determines the trained folds (not which folds run, nor reporting)."""
+    import hashlib
+
+    keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in ("fold", "report")}
+    return hashlib.sha1(json.dumps(keep, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def check_resumable(cfg: DictConfig, run_dir: Path) -> None:
+    """A run directory holds folds of one configuration: rerunning the same command into it (e.g.
+    ``hydra.run.dir=<that run>``) resumes; another configuration is refused."""
+    stamp = run_dir / "config_fingerprint.txt"
+    mine = _config_fingerprint(cfg)
+    if stamp.exists() and stamp.read_text().strip() != mine:
+        raise InputError(
+            f"{run_dir} holds folds trained with another configuration: resume with the same overrides, "
+            "or train into a new directory"
+        )
+    stamp.write_text(mine + "\n")
+
+
+def save_finished_fold(run_dir: Path, k: int, result: dict, prediction: dict) -> None:
+    """Written last, after the fold's bundle: its presence marks fold k as finished."""
+    arrays = {key: value for key, value in prediction.items() if key != "baselines"}
+    arrays.update({f"baseline_{name}": value for name, value in prediction.get("baselines", {}).items()})
+    np.savez(run_dir / f"fold{k}_predictions.npz", **arrays)
+    tmp = run_dir / f"fold{k}_result.json.tmp"
+    tmp.write_text(json.dumps(result))
+    tmp.replace(run_dir / f"fold{k}_result.json")
+
+
+def load_finished_fold(run_dir: Path, k: int):
+    """(result, prediction) of a fold finished earlier in ``run_dir``, or None."""
+    done = run_dir / f"fold{k}_result.json"
+    if not (done.exists() and (run_dir / f"fold{k}.pt").exists()):
+        return None
+    with np.load(run_dir / f"fold{k}_predictions.npz") as data:
+        arrays = {key: data[key] for key in data.files}
+    baselines = {
+        key[len("baseline_") :]: arrays.pop(key) for key in list(arrays) if key.startswith("baseline_")
+    }
+    arrays["fold"] = int(arrays["fold"])
+    return json.loads(done.read_text()), {**arrays, "baselines": baselines}
 
 
 @torch.no_grad()
