@@ -118,6 +118,32 @@ def test_resume_refuses_another_state_point(tmp_path):
         run_state_point(SimParams(**{**TINY, "stress": 6.0}), path, progress=False)
 
 
+def test_a_recompressed_run_extends_like_the_original(tmp_path):
+    """``recompress`` (lossless, checkpoint kept) leaves a run extendable to the same trajectory."""
+    from rheograph.io.hdf5 import recompress
+
+    ref, packed = tmp_path / "ref.h5", tmp_path / "packed.h5"
+    longer = SimParams(**{**TINY, "strain": 0.2})
+    run_state_point(SimParams(**TINY), ref, progress=False)
+    run_state_point(SimParams(**TINY), packed, progress=False)
+    recompress(packed)
+    run_state_point(longer, ref, progress=False)
+    run_state_point(longer, packed, progress=False)
+    a, b = read_timeseries(ref), read_timeseries(packed)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_a_truncated_file_is_named_truncated_and_left_alone(tmp_path):
+    path = tmp_path / "run.h5"
+    run_state_point(SimParams(**TINY), path, progress=False)
+    path.write_bytes(path.read_bytes()[:20000])
+    before = path.read_bytes()
+    with pytest.raises(TrajectoryFileError, match="truncated.*move it aside"):
+        run_state_point(SimParams(**{**TINY, "strain": 0.2}), path, progress=False)
+    assert path.read_bytes() == before
+
+
 def test_resume_refuses_corrupt_and_foreign_files(tmp_path):
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"not an hdf5 file at all")

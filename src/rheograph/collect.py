@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.hdf5 import PRODUCER, read_run_info
+from rheograph.io.hdf5 import PRODUCER, read_run_info, recompress
 
 USABLE = ("completed", "jammed")
 
@@ -86,11 +86,23 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("directories", nargs="+")
     ap.add_argument("--out", required=True)
+    ap.add_argument(
+        "--compress",
+        action="store_true",
+        help="rewrite finished runs losslessly compressed (files written before compression was default)",
+    )
     args = ap.parse_args(argv)
     missing = [d for d in args.directories if not Path(d).is_dir()]
     if missing:
         raise InputError(f"directory {missing[0]} does not exist")
     index = build_index(args.directories)
+    if args.compress:
+        saved = 0
+        for entry in index["runs"]:
+            if entry["status"] in USABLE:
+                before, after = recompress(entry["path"])
+                saved += before - after
+        print(f"compressed: {saved / 1e6:.1f} MB saved")
     write_index(index, args.out)
     usable = sum(e["status"] in USABLE for e in index["runs"])
     print(f"{len(index['runs'])} runs ({usable} usable), {len(index['skipped'])} skipped -> {args.out}")

@@ -48,6 +48,11 @@ SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "p
 RESUMABLE_PARAMS = {"strain", "max_wall_seconds", "checkpoint_wall_seconds", "jam_intervals"}
 
 
+# lossless (gzip + byte shuffle): halves a trajectory file; positions keep float64, since overlaps of
+# ~1e-3 a at coordinates of ~30 a need ~1e-7 relative precision to decide contacts and their CLM state
+COMPRESSION = dict(compression="gzip", compression_opts=4, shuffle=True)
+
+
 class TrajectoryFileError(InputError):
     """A trajectory file is corrupt, foreign, or belongs to another state point."""
 
@@ -84,25 +89,52 @@ class TrajectoryFile:
             ts = h5.create_group("timeseries")
             for name in TIMESERIES_SCALARS:
                 dtype = np.int64 if name == "steps" else (np.bool_ if name == "jammed" else np.float64)
-                ts.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(1024,))
+                ts.create_dataset(
+                    name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(1024,), **COMPRESSION
+                )
             for name in TIMESERIES_TENSORS:
-                ts.create_dataset(name, shape=(0, 3), maxshape=(None, 3), dtype=np.float64, chunks=(1024, 3))
+                ts.create_dataset(
+                    name, shape=(0, 3), maxshape=(None, 3), dtype=np.float64, chunks=(1024, 3), **COMPRESSION
+                )
             ts.attrs["tensor_components"] = "xx, xy, yy (sigma_zz = 0); stresses in sigma0"
             sn = h5.create_group("snapshots")
             for name in SNAPSHOT_SCALARS:
-                sn.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,))
+                sn.create_dataset(
+                    name, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,), **COMPRESSION
+                )
             sn.create_dataset(
-                "positions", shape=(0, n, 2), maxshape=(None, n, 2), dtype=np.float64, chunks=(1, n, 2)
+                "positions",
+                shape=(0, n, 2),
+                maxshape=(None, n, 2),
+                dtype=np.float64,
+                chunks=(1, n, 2),
+                **COMPRESSION,
             )
             sn.create_dataset(
-                "contact_offset", data=np.zeros(1, dtype=np.int64), maxshape=(None,), chunks=(64,)
+                "contact_offset",
+                data=np.zeros(1, dtype=np.int64),
+                maxshape=(None,),
+                chunks=(64,),
+                **COMPRESSION,
             )
             sn.create_dataset(
-                "contact_pairs", shape=(0, 2), maxshape=(None, 2), dtype=np.int64, chunks=(1024, 2)
+                "contact_pairs",
+                shape=(0, 2),
+                maxshape=(None, 2),
+                dtype=np.int64,
+                chunks=(1024, 2),
+                **COMPRESSION,
             )
-            sn.create_dataset("contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,))
             sn.create_dataset(
-                "contact_stretch", shape=(0, 2), maxshape=(None, 2), dtype=np.float64, chunks=(1024, 2)
+                "contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,), **COMPRESSION
+            )
+            sn.create_dataset(
+                "contact_stretch",
+                shape=(0, 2),
+                maxshape=(None, 2),
+                dtype=np.float64,
+                chunks=(1024, 2),
+                **COMPRESSION,
             )
         self.h5 = h5py.File(tmp, "r+")
         self.write_checkpoint(state, {})
@@ -115,12 +147,21 @@ class TrajectoryFile:
         try:
             h5 = h5py.File(self.path, "r+")
         except OSError as exc:
-            if "lock" in str(exc).lower():
+            message = str(exc).lower()
+            # match HDF5's own phrases: "sblock->base_addr" in a truncation report also contains "lock"
+            if "unable to lock file" in message:
                 raise TrajectoryFileError(
                     f"{self.path} is open in another process (HDF5 file lock): is this state point "
                     "already running?"
                 ) from exc
-            raise TrajectoryFileError(f"{self.path}: not a readable HDF5 file ({exc}); move it away") from exc
+            if "truncated file" in message:
+                raise TrajectoryFileError(
+                    f"{self.path} is truncated ({exc}): it was not modified; move it aside (e.g. to "
+                    f"{self.path.name}.corrupt) and rerun to simulate this state point afresh"
+                ) from exc
+            raise TrajectoryFileError(
+                f"{self.path}: not a readable HDF5 file ({exc}); it was not modified; move it aside and rerun"
+            ) from exc
         if h5.attrs.get("producer") != PRODUCER:
             h5.close()
             raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
@@ -245,3 +286,32 @@ def read_run_info(path: str | Path) -> dict:
             "strain": float(h5["checkpoint"].attrs["strain"]),
             "solver": h5.attrs.get("solver"),  # None in files written before the backend was recorded
         }
+
+
+def recompress(path: str | Path) -> tuple[int, int]:
+    """Rewrite a finished trajectory file with ``COMPRESSION`` (lossless; chunking, attributes and the
+    checkpoint kept, so the run can still be extended).  Written to a temporary file and swapped in
+    atomically.  Returns (bytes before, bytes after)."""
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with h5py.File(path, "r") as src, h5py.File(tmp, "w") as dst:
+        if src.attrs.get("producer") != PRODUCER:
+            raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
+        if src.attrs.get("status") == "running":
+            raise TrajectoryFileError(f"{path}: status running (a simulation may be writing it)")
+        dst.attrs.update(dict(src.attrs))
+
+        def copy(name, obj):
+            if isinstance(obj, h5py.Group):
+                dst.require_group(name).attrs.update(dict(obj.attrs))
+                return
+            options = COMPRESSION if obj.chunks else {}
+            out = dst.create_dataset(
+                name, data=obj[()], maxshape=obj.maxshape, chunks=obj.chunks, dtype=obj.dtype, **options
+            )
+            out.attrs.update(dict(obj.attrs))
+
+        src.visititems(copy)
+    before, after = path.stat().st_size, tmp.stat().st_size
+    tmp.replace(path)
+    return before, after
