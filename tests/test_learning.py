@@ -62,6 +62,13 @@ def test_edges_match_brute_force_over_all_periodic_images():
         k_n = 2e4 * PARAMS["stress"] / (6 * np.pi)
         assert feats["load"][k] == pytest.approx(np.arcsinh(k_n * abar * max(-h, 0.0)))
         assert feats["lubrication"][k] == pytest.approx(1e-3 / (max(h / abar, 0.0) + 1e-3))
+        # the pair's contact stresslet sym(r F_n) / sigma, F_n = k_n abar overlap, k_n = 2e4 sigma / (6 pi)
+        force_per_stress = 2e4 / (6 * np.pi) * abar * max(-h, 0.0)
+        assert feats["contact_shear"][k] == pytest.approx(force_per_stress * dx * dy / r)
+        assert feats["contact_normal"][k] == pytest.approx(force_per_stress * r)
+        assert feats["lubrication_shear"][k] == pytest.approx(
+            abar * r * (dx * dy / r**2) ** 2 * 1e-3 / (max(h / abar, 0.0) + 1e-3)
+        )
     assert minimum_image(1.0, 0.0, lx, ly, offset) == (1.0, 0.0)
 
 
@@ -203,6 +210,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             f"data.files={pattern}",
             f"data.cache_dir={tmp_path / 'cache'}",
             "data.phi=null",
+            "data.n_particles=null",
             "data.split=random",
             "data.num_folds=3",
             "fold=0",
@@ -278,6 +286,7 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
         f"data.files={pattern}",
         f"data.cache_dir={tmp_path / 'cache'}",
         "data.phi=null",
+        "data.n_particles=null",
         "data.split=random",
         "data.num_folds=3",
         "graph.min_strain=0.05",

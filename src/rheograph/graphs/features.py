@@ -15,8 +15,12 @@ Edge features, by name (``EDGE_FEATURES``):
   the overlaps are statistically stress-independent in these units), ``lubrication`` (delta / (xi + delta)
   in (0, 1]: the squeeze resistance 1/(xi + delta) of physics.md, frozen at xi = 0 in contact like the
   dashpot), ``log_lubrication`` (log(1/(xi + delta)), the tangential resistance), ``nxny`` (n_x n_y, the
-  shear-stress projection of a pair stresslet) and ``nxx_nyy`` (n_x^2 - n_y^2, the normal-stress
-  difference projection);
+  shear-stress projection of a pair stresslet), ``nxx_nyy`` (n_x^2 - n_y^2, the normal-stress
+  difference projection), and the pair's stress contributions that the targets are sums of (physics.md
+  §4): ``contact_shear`` = overlap a_bar r n_x n_y and ``contact_normal`` = overlap a_bar r (the spring's
+  sym(r F) in units of sigma: with k_n proportional to sigma, the contact stress / sigma is their sum per
+  area), ``lubrication_shear`` = a_bar r (n_x n_y)^2 delta / (xi + delta) (the squeeze stresslet of the
+  affine flow per unit shear rate, scaled by delta) — summed by the model's pooling, not recomputed;
 * stress-conditioned (needs the imposed stress, as every simulation and rheometer knows it):
   ``load`` = asinh(F_n / F_CL) of the contact spring F_n = k_n a_bar overlap (0 when apart).  The
   Critical Load Model makes a contact frictional exactly when F_n > F_CL, i.e. load > asinh(1).
@@ -33,7 +37,17 @@ from rheograph.errors import InputError
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
 
 PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
-PHYSICS_EDGE_FEATURES = ("contact", "overlap", "lubrication", "log_lubrication", "nxny", "nxx_nyy")
+PHYSICS_EDGE_FEATURES = (
+    "contact",
+    "overlap",
+    "lubrication",
+    "log_lubrication",
+    "nxny",
+    "nxx_nyy",
+    "contact_shear",
+    "contact_normal",
+    "lubrication_shear",
+)
 STRESS_EDGE_FEATURES = ("load",)
 EDGE_FEATURES = PAPER_EDGE_FEATURES + PHYSICS_EDGE_FEATURES + STRESS_EDGE_FEATURES
 
@@ -80,8 +94,9 @@ def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params):
     """
     p = snapshot_pairs(positions, radii, lx, ly, le_offset, cutoff, params)
     xi, r, nx, ny, overlap, lub_gap = p["xi"], p["r"], p["nx"], p["ny"], p["overlap"], p["lub_gap"]
+    abar = p["abar"]
     # F_n / F_CL = k_n a_bar overlap = stress * a_bar * overlap (overlap in units of delta_sigma)
-    load = np.arcsinh(float(params["stress"]) * p["abar"] * overlap)
+    load = np.arcsinh(float(params["stress"]) * abar * overlap)
     pair_features = {
         "gap": (xi, 1.0),
         "distance": (r, 1.0),
@@ -95,6 +110,9 @@ def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params):
         "log_lubrication": (-np.log(lub_gap), 1.0),
         "nxny": (nx * ny, 1.0),
         "nxx_nyy": (nx * nx - ny * ny, 1.0),
+        "contact_shear": (overlap * abar * r * nx * ny, 1.0),
+        "contact_normal": (overlap * abar * r, 1.0),
+        "lubrication_shear": (abar * r * (nx * ny) ** 2 * float(params["delta"]) / lub_gap, 1.0),
         "load": (load, 1.0),
     }
     edge_index = np.stack([np.r_[p["i"], p["j"]], np.r_[p["j"], p["i"]]])

@@ -82,6 +82,7 @@ class SnapshotDataModule(L.LightningDataModule):
         batch_size: int = 16,
         num_workers: int = 0,
         phi: float | None = None,
+        n_particles: int | None = None,
     ):
         super().__init__()
         if split not in SPLITS:
@@ -96,16 +97,19 @@ class SnapshotDataModule(L.LightningDataModule):
         self.graph = graph if isinstance(graph, GraphSettings) else GraphSettings(**(graph or {}))
         self.cache_dir, self.fold, self.num_folds = cache_dir, fold, num_folds
         self.split, self.split_seed, self.batch_size = split, split_seed, batch_size
-        self.num_workers, self.phi = num_workers, phi
+        self.num_workers, self.phi, self.n_particles = num_workers, phi, n_particles
         self.dataset = None
 
     def setup(self, stage=None):
         if self.dataset is not None:
             return
-        if self.phi is not None:  # per-phi model out of a pooled file list: other files are never read
-            files = [f for f in self.files if np.isclose(trajectory_phi(f), self.phi)]
+        # a model per area fraction (and system size) out of a pooled file list: other files are never read
+        for key, wanted in (("phi", self.phi), ("n_particles", self.n_particles)):
+            if wanted is None:
+                continue
+            files = [f for f in self.files if np.isclose(trajectory_param(f, key), wanted)]
             if not files:
-                raise InputError(f"data.phi={self.phi}: no trajectory at this area fraction in data.files")
+                raise InputError(f"data.{key}={wanted}: no trajectory with this value in data.files")
             self.files = files
         dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir)
         index = np.arange(len(dataset))
@@ -163,16 +167,16 @@ class SnapshotDataModule(L.LightningDataModule):
         return self._loader(self.test_idx, False)
 
 
-def trajectory_phi(path: str) -> float:
-    """Area fraction of a trajectory file (its ``param_phi`` attribute)."""
+def trajectory_param(path: str, key: str) -> float:
+    """A simulation parameter of a trajectory file (its ``param_<key>`` attribute)."""
     import h5py
 
     try:
         with h5py.File(path, "r") as h5:
-            return float(h5.attrs["param_phi"])
+            return float(h5.attrs[f"param_{key}"])
     except (OSError, KeyError) as exc:
         raise InputError(
-            f"{path}: cannot read its area fraction ({exc}); a file still being written by a simulation "
+            f"{path}: cannot read its parameter {key} ({exc}); a file still being written by a simulation "
             "is locked — train on a sweep index (python -m rheograph.collect) that lists finished runs only"
         ) from exc
 
