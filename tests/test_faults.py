@@ -96,6 +96,9 @@ def test_collect_and_flowcurve_refuse_missing_directories(tmp_path):
     assert_one_line_error(code, out, "absent", "does not exist")
     code, out = run(["-m", "rheograph.dataset_card", str(tmp_path / "absent"), "--out", "d"], tmp_path)
     assert_one_line_error(code, out, "absent", "does not exist")
+    (tmp_path / "empty").mkdir()
+    code, out = run(["-m", "rheograph.flowcurve", str(tmp_path / "empty"), "--out", "f"], tmp_path)
+    assert_one_line_error(code, out, "no rheograph trajectory")
 
 
 def test_a_corrupt_graph_cache_entry_is_rebuilt(tiny_files, tmp_path):

@@ -201,6 +201,7 @@ def test_load_feature_reproduces_the_simulators_frictional_contacts(tiny_files):
 
 
 def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
+    from rheograph.errors import InputError
     from rheograph.learn.predict import predict_file
     from rheograph.learn.train import train_folds
 
@@ -251,6 +252,26 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             ]
         )
         np.testing.assert_allclose(a, b, rtol=1e-5)
+    # a state point of the training range is in the domain; phi = 0.76 at sigma = 400 is not, and says so
+    assert result["in_domain"].mean() > 0.5
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    outside = tmp_path / "outside.h5"
+    run_state_point(
+        SimParams(n_particles=64, phi=0.76, stress=400.0, strain=0.1, snapshot_interval=0.05), outside, False
+    )
+    far = predict_file([run_dir / "fold0.pt"], outside)
+    assert not far["in_domain"].any() and np.all(np.isfinite(far["eta_pred"]))
+    # another size ratio cannot be encoded by the one-hot radius input: refused
+    other = tmp_path / "ratio.h5"
+    run_state_point(
+        SimParams(n_particles=64, phi=0.72, stress=5.0, strain=0.05, snapshot_interval=0.05, size_ratio=1.2),
+        other,
+        False,
+    )
+    with pytest.raises(InputError, match="size ratio"):
+        predict_file([run_dir / "fold0.pt"], other)
 
 
 def test_bundle_loading_refuses_foreign_files(tmp_path):

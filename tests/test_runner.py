@@ -134,6 +134,30 @@ def test_a_recompressed_run_extends_like_the_original(tmp_path):
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
 
 
+def test_a_state_point_already_running_elsewhere_is_refused(tmp_path):
+    import subprocess
+    import sys
+
+    path = tmp_path / "run.h5"
+    run_state_point(SimParams(**TINY), path, progress=False)
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            f"import h5py, time; f = h5py.File({str(path)!r}, 'r+'); print('open', flush=True); "
+            "time.sleep(60)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        with pytest.raises(TrajectoryFileError, match="open in another process"):
+            run_state_point(SimParams(**{**TINY, "strain": 0.2}), path, progress=False)
+    finally:
+        holder.kill()
+
+
 def test_a_truncated_file_is_named_truncated_and_left_alone(tmp_path):
     path = tmp_path / "run.h5"
     run_state_point(SimParams(**TINY), path, progress=False)

@@ -21,7 +21,7 @@ import h5py
 import numpy as np
 
 from rheograph.analysis import read_lfdem_data, steady_state_summary
-from rheograph.errors import one_line_errors
+from rheograph.errors import InputError, one_line_errors
 from rheograph.io.hdf5 import read_run_info, read_timeseries
 from rheograph.sim.params import scheme_name
 
@@ -228,7 +228,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     points = collect(args.directories)
     if not points:
-        raise SystemExit(f"no rheograph trajectory files under {args.directories}")
+        raise InputError(f"no rheograph trajectory files under {args.directories}")
     reference = reference_points(args.reference) if args.reference else []
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -132,6 +132,15 @@ class SnapshotDataModule(L.LightningDataModule):
         edges = torch.cat([dataset[int(i)].edge_attr for i in self.train_idx]).double()
         self.edge_mean = edges.mean(dim=0).float()
         self.edge_std = edges.std(dim=0).clamp_min(1e-6).float()
+        train = torch.as_tensor(self.train_idx)
+        self.domain = {  # what the model has seen: predict.py flags inputs outside it
+            "phi": [float(dataset.phi[train].min()), float(dataset.phi[train].max())],
+            "stress": [float(dataset.stress[train].min()), float(dataset.stress[train].max())],
+            "n_particles": sorted({int(n) for n in dataset.n_particles[train]}),
+            "size_ratio": sorted({round(trajectory_param(f, "size_ratio"), 6) for f in self.files}),
+            "edge_min": edges.min(dim=0).values.tolist(),
+            "edge_max": edges.max(dim=0).values.tolist(),
+        }
 
     def split_record(self) -> dict:
         return {

@@ -62,12 +62,18 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
     return GraphSettings(**values)
 
 
-def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str) -> None:
-    """A checkpoint loadable with torch.load(weights_only=True): tensors and plain Python values only."""
+BUNDLE_FORMAT = "rheograph-surrogate-2"
+
+
+def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str, domain: dict) -> None:
+    """A checkpoint loadable with torch.load(weights_only=True): tensors and plain Python values only.
+
+    ``domain`` records what the model was trained on (phi and sigma ranges, N, size ratio, edge-feature
+    ranges) so that predictions outside it are flagged."""
     hp = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(module.hparams).items()}
     torch.save(
         {
-            "format": "rheograph-surrogate-1",
+            "format": BUNDLE_FORMAT,
             "state_dict": module.state_dict(),
             "hparams": hp,
             "graph": {
@@ -77,6 +83,7 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
             },
             "fold": fold,
             "split": split,
+            "domain": domain,
         },
         path,
     )
@@ -148,7 +155,7 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
             settings.pressure_scale,
         )
         predictions.append(dict(fold=k, pred=pred, true=true, baselines=baselines, **meta))
-        save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split)
+        save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
         result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
         groups = meta["phi"] * 1e6 + meta["stress"]
         for name, value in fold_metrics(pred, true, groups).items():
