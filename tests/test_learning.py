@@ -325,3 +325,32 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
     assert [f["fold"] for f in metrics["folds"]] == [0, 1, 2] and np.isfinite(summary["val/loss"])
     with pytest.raises(InputError, match="another configuration"):
         train_folds(compose_train([*base, "model.hidden=16"]), run_dir)
+
+
+def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path):
+    """fold_workers=2 trains folds in two processes; with one thread each and the same per-fold seeds, the
+    test predictions equal those of one process training the folds in turn."""
+    from rheograph.learn.train import train_folds
+
+    pattern = str(Path(tiny_files[0]).parent / "*.h5")
+    base = [
+        f"data.files={pattern}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.phi=null",
+        "data.n_particles=null",
+        "data.split=random",
+        "data.num_folds=3",
+        "graph.min_strain=0.05",
+        "trainer.max_epochs=3",
+        "~logger",
+        "trainer.enable_progress_bar=false",
+        "model.hidden=8",
+        "report=false",
+        "threads=1",
+    ]
+    train_folds(compose_train(base), tmp_path / "sequential")
+    train_folds(compose_train([*base, "fold_workers=2"]), tmp_path / "parallel")
+    a = np.load(tmp_path / "sequential" / "test_predictions.npz")
+    b = np.load(tmp_path / "parallel" / "test_predictions.npz")
+    np.testing.assert_array_equal(a["fold"], b["fold"])
+    np.testing.assert_allclose(a["pred"], b["pred"], rtol=1e-6)

@@ -89,14 +89,101 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
     )
 
 
+def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) -> tuple[dict, dict]:
+    """Train, test and save fold ``k``; returns (result row, test predictions with baselines)."""
+    import lightning as L
+
+    L.seed_everything(int(cfg.seed) + k, workers=True)
+    dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
+    dm.setup()
+    dm.save_split(run_dir / f"fold{k}_split.json")
+    module = instantiate(
+        cfg.model,
+        edge_in=len(settings.edge_features),
+        global_in=len(settings.graph_inputs),
+        viscosity_scale=settings.viscosity_scale,
+        pressure_scale=settings.pressure_scale,
+        _convert_="all",
+    )
+    module.set_target_scaling(dm.target_mean, dm.target_std)
+    module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
+    callbacks = [instantiate(c) for c in cfg.callbacks.values()]
+    logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
+    trainer = instantiate(
+        cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=str(run_dir / f"fold{k}")
+    )
+    trainer.fit(module, datamodule=dm)
+    ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
+    if ckpt is not None and ckpt.best_model_path:
+        state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
+        module.load_state_dict(state)
+    best_val = (
+        float(ckpt.best_model_score)
+        if ckpt is not None and ckpt.best_model_score is not None
+        else float(trainer.callback_metrics.get("val/loss", np.nan))
+    )
+    if not np.isfinite(best_val):
+        raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
+    test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
+    pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
+    fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
+    baselines = baseline_predictions(
+        dataset_arrays(dm.dataset, fitted),
+        dataset_arrays(dm.dataset, dm.test_idx),
+        settings.viscosity_scale,
+        settings.pressure_scale,
+    )
+    prediction = dict(fold=k, pred=pred, true=true, baselines=baselines, **meta)
+    save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
+    result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
+    groups = meta["phi"] * 1e6 + meta["stress"]
+    for name, value in fold_metrics(pred, true, groups).items():
+        result[f"test/{name}"] = value
+    for model_name, model_pred in baselines.items():
+        for name, value in fold_metrics(model_pred, true, groups).items():
+            result[f"baseline/{model_name}/{name}"] = value
+    save_finished_fold(run_dir, k, result, prediction)
+    if logger:
+        logger.log_hyperparams(
+            _flat_hparams(cfg),
+            {"hp/" + key.replace("/", "_"): v for key, v in result.items() if key != "fold"},
+        )
+    return result, prediction
+
+
+def _fold_process(cfg_yaml: str, run_dir: str, k: int) -> None:
+    """Entry of one fold process (``fold_workers`` > 1): one torch thread, results to ``run_dir``."""
+    os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+    cfg = OmegaConf.create(cfg_yaml)
+    torch.set_num_threads(1)
+    logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
+    train_fold(cfg, Path(run_dir), k, graph_settings(cfg))
+
+
+def train_folds_in_processes(cfg: DictConfig, run_dir: Path, folds: list[int]) -> None:
+    """Train ``folds`` in ``cfg.fold_workers`` parallel processes (one per core, one thread each); each
+    writes its finished-fold files, which the caller then collects like a resumed run's."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    if not folds:
+        return
+    # the graph cache is built once, here, not by every process at the same time
+    instantiate(cfg.data, graph=graph_settings(cfg), fold=0, _convert_="all").setup()
+    cfg_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+    workers = min(int(cfg.fold_workers), len(folds))
+    log.info("training folds %s in %d processes", folds, workers)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        for future in [pool.submit(_fold_process, cfg_yaml, str(run_dir), k) for k in folds]:
+            future.result()  # re-raises a fold's error here
+
+
 def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
     """Train the configured folds; write bundles, splits, predictions and the report into ``run_dir``.
 
     Returns the mean (over folds) of every test metric plus ``val/loss`` (the mean best validation loss),
     the objective of the hyperparameter search.  ``trial`` (optuna) gets per-fold intermediate values.
     """
-    import lightning as L
-
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     threads = int(cfg.get("threads") or 0) or max(1, min(2, os.cpu_count() or 1))
     torch.set_num_threads(threads)
@@ -106,70 +193,19 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
     check_resumable(cfg, run_dir)
     num_folds = int(cfg.data.num_folds)
     folds = range(num_folds) if cfg.get("fold") is None else [int(cfg.fold)]
+    workers = int(cfg.get("fold_workers") or 1)
+    if workers > 1 and trial is None and len(folds) > 1:
+        train_folds_in_processes(cfg, run_dir, [k for k in folds if load_finished_fold(run_dir, k) is None])
     fold_results, predictions = [], []
     for k in folds:
         finished = load_finished_fold(run_dir, k)
-        if finished is not None:  # a resumed run keeps the folds it finished before
-            log.info("fold %d finished in an earlier invocation: kept", k)
-            fold_results.append(finished[0])
-            predictions.append(finished[1])
-            continue
-        L.seed_everything(int(cfg.seed) + k, workers=True)
-        dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
-        dm.setup()
-        dm.save_split(run_dir / f"fold{k}_split.json")
-        module = instantiate(
-            cfg.model,
-            edge_in=len(settings.edge_features),
-            global_in=len(settings.graph_inputs),
-            viscosity_scale=settings.viscosity_scale,
-            pressure_scale=settings.pressure_scale,
-            _convert_="all",
-        )
-        module.set_target_scaling(dm.target_mean, dm.target_std)
-        module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
-        callbacks = [instantiate(c) for c in cfg.callbacks.values()]
-        logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
-        trainer = instantiate(
-            cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=str(run_dir / f"fold{k}")
-        )
-        trainer.fit(module, datamodule=dm)
-        ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
-        if ckpt is not None and ckpt.best_model_path:
-            state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
-            module.load_state_dict(state)
-        best_val = (
-            float(ckpt.best_model_score)
-            if ckpt is not None and ckpt.best_model_score is not None
-            else float(trainer.callback_metrics.get("val/loss", np.nan))
-        )
-        if not np.isfinite(best_val):
-            raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
-        test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
-        pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
-        fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
-        baselines = baseline_predictions(
-            dataset_arrays(dm.dataset, fitted),
-            dataset_arrays(dm.dataset, dm.test_idx),
-            settings.viscosity_scale,
-            settings.pressure_scale,
-        )
-        predictions.append(dict(fold=k, pred=pred, true=true, baselines=baselines, **meta))
-        save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
-        result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
-        groups = meta["phi"] * 1e6 + meta["stress"]
-        for name, value in fold_metrics(pred, true, groups).items():
-            result[f"test/{name}"] = value
-        for model_name, model_pred in baselines.items():
-            for name, value in fold_metrics(model_pred, true, groups).items():
-                result[f"baseline/{model_name}/{name}"] = value
+        if finished is not None:  # a resumed run (or a fold process) finished it: kept
+            log.info("fold %d finished (earlier invocation or fold process): kept", k)
+            result, prediction = finished
+        else:
+            result, prediction = train_fold(cfg, run_dir, k, settings)
         fold_results.append(result)
-        save_finished_fold(run_dir, k, result, predictions[-1])
-        if logger:
-            logger.log_hyperparams(
-                _flat_hparams(cfg),
-                {"hp/" + key.replace("/", "_"): v for key, v in result.items() if key != "fold"},
-            )
+        predictions.append(prediction)
         if trial is not None:
             trial.report(float(np.mean([r["val/loss"] for r in fold_results])), step=len(fold_results))
             if trial.should_prune():
@@ -194,7 +230,8 @@ def _config_fingerprint(cfg: DictConfig) -> str:
     """Hash of everything that determines the trained folds (not which folds run, nor reporting)."""
     import hashlib
 
-    keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in ("fold", "report")}
+    skip = ("fold", "report", "threads", "fold_workers")  # how and which folds run, not what they learn
+    keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in skip}
     return hashlib.sha1(json.dumps(keep, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
