@@ -57,8 +57,21 @@ def train_main(cfg: DictConfig) -> float:
     run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
     summary = train_folds(cfg, run_dir)
     for key, value in sorted(summary.items()):
-        log.info("%s = %.4g", key, value)
-    log.info("report: %s", run_dir / "report.md")
+        log.debug("%s = %.4g", key, value)
+    held_out = "held-out trajectories" if cfg.data.split == "grouped" else "random snapshots"
+    log.info(
+        "test R² (%s, mean of %d fold(s)): log η_r %.3f, log Π %.3f, Z_μ %.3f | descriptor baseline "
+        "%.3f, %.3f, %.3f",
+        held_out,
+        int(cfg.data.num_folds) if cfg.get("fold") is None else 1,
+        summary["test/r2_log_eta"],
+        summary["test/r2_log_pressure"],
+        summary["test/r2_z_mu"],
+        summary.get("baseline/descriptors/r2_log_eta", float("nan")),
+        summary.get("baseline/descriptors/r2_log_pressure", float("nan")),
+        summary.get("baseline/descriptors/r2_z_mu", float("nan")),
+    )
+    log.info("report: %s (all metrics: metrics.json)", run_dir / "report.md")
     return summary["val/loss"]
 
 
