@@ -3,7 +3,8 @@ scored on the same folds, written as one table into docs/benchmarks.md (section 
 and per-run reports under docs/results/surrogate_study/<variant>_<split>/.
 
     OMP_WAIT_POLICY=PASSIVE python bench/surrogate_study.py --phi 0.76 --epochs 60 \\
-        --variants paper physics_positions physics physics_mean_pool --splits grouped random
+        --runs paper:grouped physics_positions:grouped physics:grouped physics_mean_pool:grouped \\
+               paper:random physics:random
 
 Variants (config groups of conf/): ``paper`` = graph=paper model=resgcn (the seed paper: geometric edge
 features, softmax aggregation, mean pooling, positions only); ``physics_positions`` = physics-aware edge
@@ -82,8 +83,12 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--phi", type=float, default=0.76)
     ap.add_argument("--files", default="data/paper/index.json")
-    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
-    ap.add_argument("--splits", nargs="+", default=["grouped", "random"], choices=["grouped", "random"])
+    ap.add_argument(
+        "--runs",
+        nargs="+",
+        default=[f"{v}:grouped" for v in VARIANTS] + ["paper:random", "physics:random"],
+        help="variant:split pairs (variants: " + ", ".join(VARIANTS) + "; splits: grouped, random)",
+    )
     ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--batch-size", type=int, default=32)
     ap.add_argument("--seed", type=int, default=0)
@@ -92,18 +97,21 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     out = Path(args.out)
     rows, baselines = [], {}
-    for split in args.splits:
-        for name in args.variants:
-            metrics, minutes = run_variant(name, split, args, out)
-            folds = metrics["folds"]
-            rows.append(
-                f"| {name} | {split} | "
-                + " | ".join(cell(folds, f"test/{key}") for key, _ in COLUMNS)
-                + f" | {cell(folds, 'test/fluct_eta')} | {minutes:.1f} |"
-            )
-            for b in ("stress_mean", "descriptors", "descriptors_ridge"):
-                baselines.setdefault((b, split), folds)
-            print(rows[-1], flush=True)
+    for run in args.runs:
+        name, _, split = run.partition(":")
+        if name not in VARIANTS or split not in ("grouped", "random"):
+            raise SystemExit(f"--runs {run}: expected variant:split with variant in {list(VARIANTS)}")
+        metrics, minutes = run_variant(name, split, args, out)
+        folds = metrics["folds"]
+        rows.append(
+            f"| {name} | {split} | "
+            + " | ".join(cell(folds, f"test/{key}") for key, _ in COLUMNS)
+            + f" | {cell(folds, 'test/fluct_eta')} | {minutes:.1f} |"
+        )
+        for b in ("stress_mean", "descriptors", "descriptors_ridge"):
+            baselines.setdefault((b, split), folds)
+        print(rows[-1], flush=True)
+
     for (b, split), folds in baselines.items():
         rows.append(
             f"| baseline {b} | {split} | "
