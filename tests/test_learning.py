@@ -354,3 +354,27 @@ def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path
     b = np.load(tmp_path / "parallel" / "test_predictions.npz")
     np.testing.assert_array_equal(a["fold"], b["fold"])
     np.testing.assert_allclose(a["pred"], b["pred"], rtol=1e-6)
+
+
+def test_leave_one_phi_out_tests_exactly_one_area_fraction(tiny_files, tmp_path):
+    from rheograph.errors import InputError
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    files = list(tiny_files)
+    for stress in (0.5, 5.0, 50.0):
+        path = tmp_path / f"phi070_s{stress:g}.h5"
+        params = SimParams(
+            n_particles=64, phi=0.70, stress=stress, strain=0.2, snapshot_interval=0.025, disp_max=2e-3
+        )
+        run_state_point(params, path, progress=False)
+        files.append(str(path))
+    for fold, phi in enumerate((0.70, 0.72)):
+        dm = SnapshotDataModule(files, str(tmp_path / "cache"), SETTINGS, fold=fold, num_folds=2, split="phi")
+        dm.setup()
+        phis = dm.dataset.phi.numpy()
+        assert np.allclose(phis[dm.test_idx], phi)
+        assert not np.isclose(phis[np.r_[dm.train_idx, dm.val_idx]], phi).any()
+        assert dm.val_idx.size and dm.train_idx.size
+    with pytest.raises(InputError, match="num_folds must be 2"):
+        SnapshotDataModule(files, str(tmp_path / "cache"), SETTINGS, fold=0, num_folds=3, split="phi").setup()

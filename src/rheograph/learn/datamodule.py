@@ -23,7 +23,7 @@ from torch_geometric.loader import DataLoader
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
 
-SPLITS = ("random", "grouped")
+SPLITS = ("random", "grouped", "phi")
 
 
 def kfold_assignment(
@@ -113,17 +113,35 @@ class SnapshotDataModule(L.LightningDataModule):
             self.files = files
         dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir)
         index = np.arange(len(dataset))
-        groups, strata = None, None
-        if self.split == "grouped":
-            groups = dataset.run_id.numpy()[index]
-            strata = np.round(dataset.phi.numpy()[index], 6) * 1e6 + np.round(
-                dataset.stress.numpy()[index], 6
-            )
-        folds = kfold_assignment(index.size, self.num_folds, self.split_seed, groups, strata)
         self.dataset = dataset
-        self.test_idx = index[folds == self.fold]
-        self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
-        self.train_idx = index[(folds != self.fold) & (folds != (self.fold + 1) % self.num_folds)]
+        runs = dataset.run_id.numpy()
+        state_points = np.round(dataset.phi.numpy(), 6) * 1e6 + np.round(dataset.stress.numpy(), 6)
+        if self.split == "phi":
+            # leave one area fraction out: fold k tests the k-th phi; validation = one in five of the
+            # other phi's trajectories (stratified like the grouped split), training = the rest
+            phis = np.unique(np.round(dataset.phi.numpy(), 6))
+            if phis.size != self.num_folds:
+                raise InputError(
+                    f"data.split=phi holds out one area fraction per fold: data.num_folds must be "
+                    f"{phis.size} (the area fractions {phis.tolist()}), got {self.num_folds}"
+                )
+            test = np.isclose(dataset.phi.numpy(), phis[self.fold])
+            rest = index[~test]
+            n_inner = min(5, np.unique(runs[rest]).size)
+            inner = kfold_assignment(rest.size, n_inner, self.split_seed, runs[rest], state_points[rest])
+            self.test_idx, self.val_idx, self.train_idx = index[test], rest[inner == 0], rest[inner != 0]
+        else:
+            grouped = self.split == "grouped"
+            folds = kfold_assignment(
+                index.size,
+                self.num_folds,
+                self.split_seed,
+                runs if grouped else None,
+                state_points if grouped else None,
+            )
+            self.test_idx = index[folds == self.fold]
+            self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
+            self.train_idx = index[(folds != self.fold) & (folds != (self.fold + 1) % self.num_folds)]
         y = dataset.y[torch.as_tensor(self.train_idx)]
         self.target_mean = y.mean(dim=0)
         self.target_std = y.std(dim=0).clamp_min(1e-6)
