@@ -69,6 +69,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 strain=entry["strain"],
                 snapshots=snaps,
                 n_snapshots=int(keep.sum()),
+                snapshot_interval=p["snapshot_interval"],
                 flowing=flowing,
                 decorrelation={
                     k: decorrelation_strain(v[steady], p["output_interval"]) if flowing else np.nan
@@ -157,16 +158,21 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         "Decorrelation strain: where the autocorrelation of the instantaneous series (log η_r, Π, Z_μ; "
         "rows every output interval, steady window) first drops below 1/e; median (min–max) over runs.  "
         "Transient: the strain after which 0.1-strain block means of log η_r stay within 2 standard "
-        "deviations of the steady ones.",
+        "deviations of the steady ones (searched below the steady window's start, so 1.0 means: not "
+        "settled before it in that run).  Neighbour correlation: exp(−Δγ/τ) for the snapshot spacing Δγ "
+        "and the median decorrelation strain τ of log η_r (1/e at Δγ = τ).",
         "",
-        "| N | φ | decorrelation log η_r | decorrelation Π | decorrelation Z_μ | transient |",
-        "|---|---|---|---|---|---|",
+        "| N | φ | decorrelation log η_r | decorrelation Π | decorrelation Z_μ | transient "
+        "| snapshot spacing | neighbour correlation |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for (n, phi), runs in sorted(by_phi_n.items()):
+        tau = np.nanmedian([r["decorrelation"]["viscosity"] for r in runs])
+        spacing = np.median([r["snapshot_interval"] for r in runs])
         lines.append(
             f"| {n} | {phi:.2f} | "
             + " | ".join(_median([r["decorrelation"][k] for r in runs]) for k in TARGETS)
-            + f" | {_median([r['transient'] for r in runs])} |"
+            + f" | {_median([r['transient'] for r in runs])} | {spacing:g} | {np.exp(-spacing / tau):.2f} |"
         )
     jam_lines = []
     for (n, phi), runs in sorted(by_phi_n.items()):
