@@ -63,11 +63,18 @@ def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=overrides)
     run_dir = out / f"{name}_{split}"
+    if args.reuse and (run_dir / "metrics.json").exists():  # a finished run of an earlier invocation
+        minutes = run_dir / "train_minutes.txt"
+        return (
+            json.loads((run_dir / "metrics.json").read_text()),
+            float(minutes.read_text()) if minutes.exists() else float("nan"),
+        )
     if run_dir.exists():
         shutil.rmtree(run_dir)
     t0 = time.perf_counter()
     train_folds(cfg, run_dir)
     minutes = (time.perf_counter() - t0) / 60
+    (run_dir / "train_minutes.txt").write_text(f"{minutes:.2f}\n")
     for big in run_dir.glob("fold*/"):  # lightning checkpoints: the bundles fold*.pt are kept
         shutil.rmtree(big, ignore_errors=True)
     shutil.rmtree(run_dir / "tensorboard", ignore_errors=True)
@@ -94,6 +101,9 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "surrogate_study"))
     ap.add_argument("--no-write", action="store_true", help="do not touch docs/benchmarks.md")
+    ap.add_argument(
+        "--reuse", action="store_true", help="take runs whose metrics.json exists instead of retraining them"
+    )
     args = ap.parse_args(argv)
     out = Path(args.out)
     rows, baselines = [], {}
@@ -131,10 +141,8 @@ def main(argv=None) -> None:
         *rows,
         "",
         "Command: `python bench/surrogate_study.py --phi "
-        f"{args.phi} --epochs {args.epochs} --batch-size {args.batch_size} --variants "
-        + " ".join(args.variants)
-        + " --splits "
-        + " ".join(args.splits)
+        f"{args.phi} --epochs {args.epochs} --batch-size {args.batch_size} --runs "
+        + " ".join(args.runs)
         + "`; reports: docs/results/surrogate_study/.",
     ]
     print("\n".join(lines))

@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
 
 from rheograph.analysis import decorrelation_strain  # noqa: E402
+from rheograph.dataset_card import run_cpu_seconds  # noqa: E402
 from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
 from rheograph.learn.predict import predict_file  # noqa: E402
 from rheograph.learn.train import train_folds  # noqa: E402
@@ -80,25 +81,26 @@ def main(argv=None) -> None:
         result = predict_file(bundles, path)
         seconds += time.perf_counter() - t0
         n_snapshots += result["strain"].size
-        preds.append(np.stack([result[f"{t}_pred"] for t in TARGET_NAMES], axis=1))
-        stds.append(np.stack([result[f"{t}_pred_std"] for t in TARGET_NAMES], axis=1))
-        trues.append(np.stack([result[f"{t}_sim"] for t in TARGET_NAMES], axis=1))
+        steady = result["strain"] >= 1.0  # scored like the training data: after the start-up transient
+        preds.append(np.stack([result[f"{t}_pred"][steady] for t in TARGET_NAMES], axis=1))
+        stds.append(np.stack([result[f"{t}_pred_std"][steady] for t in TARGET_NAMES], axis=1))
+        trues.append(np.stack([result[f"{t}_sim"][steady] for t in TARGET_NAMES], axis=1))
+        cpu = run_cpu_seconds(path)
         with h5py.File(path, "r") as h5:
-            cpu, strain = (
-                float(h5["summary"].attrs.get("cpu_seconds", np.nan)),
-                float(h5.attrs["param_strain"]),
-            )
+            strain = float(h5.attrs["param_strain"])
             ts = h5["timeseries"]
             steady = ts["strain"][()] >= 1.0
-            tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), 0.01)
-        sim_cost.append(cpu / strain * max(tau, 0.01))
+            interval = float(h5.attrs["param_output_interval"])
+            tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
+        sim_cost.append(cpu / strain * max(tau, interval))
     pred, std, true = np.concatenate(preds), np.concatenate(stds), np.concatenate(trues)
     per_snapshot = seconds / n_snapshots
     finite = [c for c in sim_cost if np.isfinite(c)]
     lines = [
         f"N = {args.n}, φ = {args.phi}: 5-fold ensemble trained on seeds {args.train_seeds} "
         f"({len(train_files)} trajectories, held-out-trajectory folds), tested on the {len(test_files)} "
-        f"trajectories of seed {args.test_seed} ({n_snapshots} snapshots) that no model has seen.",
+        f"trajectories of seed {args.test_seed} ({len(pred)} snapshots at strain ≥ 1) that no model "
+        "has seen.",
         "",
         "| target | R² (ensemble mean) | R² log | coverage ±1σ | coverage ±2σ | median σ_ens / |error| |",
         "|---|---|---|---|---|---|",

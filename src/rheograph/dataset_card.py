@@ -26,10 +26,15 @@ from rheograph.flowcurve import collect
 TARGETS = ("viscosity", "pressure", "z_mu")
 
 
-def _log_cpu_seconds(run_dir: Path) -> float:
-    """Seconds reported by simulate.log over all invocations (files written before ``cpu_seconds``
-    existed; the runs are single-threaded, one per core, so wall time is CPU time)."""
-    log = run_dir / "simulate.log"
+def run_cpu_seconds(path: str | Path) -> float:
+    """CPU seconds a run cost: ``summary/cpu_seconds`` of its file, or, for files written before it was
+    recorded, the seconds that simulate.log reports over all invocations (single-threaded runs, one per
+    core, so wall time is CPU time).  NaN when neither exists."""
+    path = Path(path)
+    with h5py.File(path, "r") as h5:
+        if "summary" in h5 and "cpu_seconds" in h5["summary"].attrs:
+            return float(h5["summary"].attrs["cpu_seconds"])
+    log = path.parent / "simulate.log"
     if not log.exists():
         return float("nan")
     return sum(float(m) for m in re.findall(r"steps, ([\d.]+) s\)", log.read_text()))
@@ -53,9 +58,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
             snap_strain = sn["strain"][()]
             keep = snap_strain >= min_strain
             snaps = {k: sn[k][()][keep] for k in (*TARGETS, "shear_rate")}
-            cpu = float(h5["summary"].attrs.get("cpu_seconds", np.nan)) if "summary" in h5 else np.nan
-        if not np.isfinite(cpu):
-            cpu = _log_cpu_seconds(path.parent)
+        cpu = run_cpu_seconds(path)
         steady = strain >= p["steady_state_strain"]
         flowing = entry["status"] != "jammed"
         records.append(
