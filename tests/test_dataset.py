@@ -42,8 +42,8 @@ def test_flowing_snapshots_have_finite_targets_and_jammed_runs_are_labelled(inde
             if entry["status"] == "jammed":
                 assert not np.isfinite(h5["summary"].attrs["viscosity"])  # never averaged
                 assert np.isfinite(targets[:, 1:]).all()  # Pi and Z_mu of the packing remain valid
-            else:
-                assert entry["status"] == "completed", entry["path"]
+            else:  # finished, or partial and committed to be resumed (N = 2000 spans invocations)
+                assert entry["status"] in ("completed", "interrupted", "wall_limit"), entry["path"]
                 assert np.isfinite(targets).all() and (targets[:, 2] >= 0).all()
 
 
