@@ -378,3 +378,34 @@ def test_leave_one_phi_out_tests_exactly_one_area_fraction(tiny_files, tmp_path)
         assert dm.val_idx.size and dm.train_idx.size
     with pytest.raises(InputError, match="num_folds must be 2"):
         SnapshotDataModule(files, str(tmp_path / "cache"), SETTINGS, fold=0, num_folds=3, split="phi").setup()
+
+
+def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
+    """A shear-jammed run's eta_r is not a value: neither the metrics nor the loss may use it."""
+    from rheograph.learn.module import SurrogateModule, fold_metrics
+
+    rng = np.random.default_rng(0)
+    true = np.abs(rng.normal(10, 2, (20, 3)))
+    pred = true * (1 + 0.05 * rng.normal(size=true.shape))
+    groups = np.repeat([1.0, 2.0], 10)
+    jammed = np.zeros(20, dtype=bool)
+    jammed[3] = True
+    wild = pred.copy()
+    wild[3, 0] = 1e6  # a diverging apparent viscosity
+    clean = fold_metrics(pred, true, groups, jammed)
+    spoilt = fold_metrics(wild, true, groups, jammed)
+    assert spoilt["r2_log_eta"] == pytest.approx(clean["r2_log_eta"]) and spoilt["n_jammed"] == 1
+    assert spoilt["r2_pressure"] == pytest.approx(clean["r2_pressure"])
+
+    graphs = snapshot_graphs(tiny_files[1], SETTINGS, 0)[:2]
+    batch = Batch.from_data_list(graphs)
+    module = SurrogateModule(edge_in=6).eval()
+    module.log = lambda *a, **k: None
+    base = module._step(batch, "val")
+    batch.jammed[0] = True
+    batch.y[0, 0] = 1e6
+    masked = module._step(batch, "val")
+    only_flowing = module._step(Batch.from_data_list(graphs[1:]), "val")
+    # with graph 0 jammed, its eta_r term drops out: eta_r's loss is that of graph 1 alone
+    assert masked.item() != pytest.approx(base.item())
+    assert np.isfinite(masked.item()) and masked.item() < 1e3 and only_flowing.item() > 0

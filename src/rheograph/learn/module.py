@@ -86,11 +86,22 @@ def fluctuation_correlation(pred: np.ndarray, true: np.ndarray, groups: np.ndarr
         return np.array([np.corrcoef(dp[:, k], dt[:, k])[0, 1] for k in range(len(TARGET_NAMES))])
 
 
-def fold_metrics(pred: np.ndarray, true: np.ndarray, groups: np.ndarray) -> dict:
-    """``regression_metrics`` plus ``fluct_*``: the within-state-point fluctuation correlation."""
+def fold_metrics(pred: np.ndarray, true: np.ndarray, groups: np.ndarray, jammed=None) -> dict:
+    """``regression_metrics`` plus ``fluct_*``: the within-state-point fluctuation correlation.
+
+    ``jammed`` (G,) bool marks snapshots of shear-jammed runs: eta_r is not scored on them (it has no
+    finite value), Pi and Z_mu are; ``n_jammed`` says how many there were."""
     out = regression_metrics(pred, true)
     for name, value in zip(TARGET_NAMES, fluctuation_correlation(pred, true, groups)):
         out[f"fluct_{name}"] = float(value)
+    jammed = np.zeros(len(pred), dtype=bool) if jammed is None else np.asarray(jammed, dtype=bool)
+    out["n_jammed"] = int(jammed.sum())
+    if jammed.any():
+        flowing = ~jammed
+        eta = regression_metrics(pred[flowing], true[flowing]) if flowing.sum() > 1 else {}
+        for key in [k for k in out if k.endswith("_eta")]:
+            out[key] = eta.get(key, float("nan"))
+        out["fluct_eta"] = float(fluctuation_correlation(pred[flowing], true[flowing], groups[flowing])[0])
     return out
 
 
@@ -165,7 +176,11 @@ class SurrogateModule(L.LightningModule):
     def _step(self, batch, stage: str):
         z = self._net(batch)
         target = (batch.y - self.target_mean) / self.target_std
-        per_target = self.huber(z, target).mean(dim=0)
+        # a shear-jammed run has no viscosity (its apparent eta_r diverges): its snapshots train Pi and
+        # Z_mu (the loaded static packing) but never eta_r
+        scored = torch.ones_like(target)
+        scored[:, 0] = (~batch.jammed.view(-1)).float()
+        per_target = (self.huber(z, target) * scored).sum(dim=0) / scored.sum(dim=0).clamp_min(1.0)
         loss = (per_target * self.loss_weights).sum()
         if not torch.isfinite(loss):
             raise FloatingPointError(

@@ -137,10 +137,10 @@ def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) 
     save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
     result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
     groups = meta["phi"] * 1e6 + meta["stress"]
-    for name, value in fold_metrics(pred, true, groups).items():
+    for name, value in fold_metrics(pred, true, groups, meta["jammed"]).items():
         result[f"test/{name}"] = value
     for model_name, model_pred in baselines.items():
-        for name, value in fold_metrics(model_pred, true, groups).items():
+        for name, value in fold_metrics(model_pred, true, groups, meta["jammed"]).items():
             result[f"baseline/{model_name}/{name}"] = value
     save_finished_fold(run_dir, k, result, prediction)
     if logger:
@@ -278,25 +278,31 @@ def predict_dataset(module, dataset, batch_size: int = 64):
     from torch_geometric.loader import DataLoader
 
     module.eval()
-    preds, trues, stress, phi, run = [], [], [], [], []
+    preds, trues, stress, phi, run, jammed = [], [], [], [], [], []
     for batch in DataLoader(dataset, batch_size=batch_size):
         preds.append(module(batch).numpy())
         trues.append(batch.y_raw.numpy())
         stress.append(batch.stress.numpy())
         phi.append(batch.phi.numpy())
         run.append(batch.run_id.numpy())
+        jammed.append(batch.jammed.numpy())
     hp = module.hparams
     pred = physical_targets(np.concatenate(preds), hp.viscosity_scale, hp.pressure_scale)
     return (
         pred,
         np.concatenate(trues),
-        {"stress": np.concatenate(stress), "phi": np.concatenate(phi), "run_id": np.concatenate(run)},
+        {
+            "stress": np.concatenate(stress),
+            "phi": np.concatenate(phi),
+            "run_id": np.concatenate(run),
+            "jammed": np.concatenate(jammed),
+        },
     )
 
 
 def _stack_predictions(predictions) -> dict:
     out = {}
-    for key in ("pred", "true", "stress", "phi", "run_id"):
+    for key in ("pred", "true", "stress", "phi", "run_id", "jammed"):
         out[key] = np.concatenate([p[key] for p in predictions])
     for name in predictions[0].get("baselines", {}):
         out[f"baseline_{name}"] = np.concatenate([p["baselines"][name] for p in predictions])
