@@ -16,6 +16,7 @@ import argparse
 import json
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -25,7 +26,9 @@ import numpy as np  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
 
 from rheograph.collect import read_index  # noqa: E402
-from rheograph.learn.train import train_folds  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from surrogate_study import train_or_resume  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (("r2_log_eta", "log η_r"), ("r2_log_pressure", "log Π"), ("r2_z_mu", "Z_μ"))
@@ -41,6 +44,7 @@ def main(argv=None) -> None:
     ap.add_argument("--split", default="grouped", choices=["grouped", "random"])
     ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--index", default="data/paper/index.json")
+    ap.add_argument("--fold-workers", type=int, default=1, help="parallel fold processes (one per core)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "surrogate_per_phi"))
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("overrides", nargs="*", help="extra train.py overrides (after --)")
@@ -65,15 +69,14 @@ def main(argv=None) -> None:
                 "trainer.enable_progress_bar=false",
                 "callbacks.early_stopping.patience=1000",
                 "~logger",
+                f"fold_workers={args.fold_workers}",
                 *args.overrides,
             ]
             with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
                 cfg = compose(config_name="train", overrides=overrides)
             run_dir = Path(args.out) / f"N{n}_phi{phi:g}"
-            if run_dir.exists():
-                shutil.rmtree(run_dir)
             t0 = time.perf_counter()
-            train_folds(cfg, run_dir)
+            train_or_resume(cfg, run_dir)
             minutes = (time.perf_counter() - t0) / 60
             for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:
                 shutil.rmtree(big, ignore_errors=True)
@@ -152,8 +155,6 @@ def write(results: dict, args) -> None:
     ]
     print("\n".join(lines))
     if not args.no_write:
-        import sys
-
         sys.path.insert(0, str(ROOT / "bench"))
         from simulate_speed import write_section
 

@@ -45,6 +45,20 @@ COLUMNS = [
 ]
 
 
+def train_or_resume(cfg, run_dir: Path) -> None:
+    """Train the folds into ``run_dir``, keeping folds an interrupted earlier invocation of the same
+    configuration finished; a directory of another configuration is replaced."""
+    from rheograph.errors import InputError
+
+    try:
+        train_folds(cfg, run_dir)
+    except InputError as exc:
+        if "another configuration" not in str(exc):
+            raise
+        shutil.rmtree(run_dir)
+        train_folds(cfg, run_dir)
+
+
 def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
     overrides = [
         *VARIANTS[name],
@@ -56,6 +70,7 @@ def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
         "trainer.enable_progress_bar=false",
         "callbacks.early_stopping.patience=1000",
         "~logger",
+        f"fold_workers={args.fold_workers}",
         f"seed={args.seed}",
     ]
     if name == "paper":  # the paper's constant learning rate over the same epoch budget
@@ -69,10 +84,8 @@ def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
             json.loads((run_dir / "metrics.json").read_text()),
             float(minutes.read_text()) if minutes.exists() else float("nan"),
         )
-    if run_dir.exists():
-        shutil.rmtree(run_dir)
     t0 = time.perf_counter()
-    train_folds(cfg, run_dir)
+    train_or_resume(cfg, run_dir)
     minutes = (time.perf_counter() - t0) / 60
     (run_dir / "train_minutes.txt").write_text(f"{minutes:.2f}\n")
     for big in run_dir.glob("fold*/"):  # lightning checkpoints: the bundles fold*.pt are kept
@@ -99,6 +112,7 @@ def main(argv=None) -> None:
     ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--batch-size", type=int, default=32)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--fold-workers", type=int, default=1, help="parallel fold processes (one per core)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "surrogate_study"))
     ap.add_argument("--no-write", action="store_true", help="do not touch docs/benchmarks.md")
     ap.add_argument(

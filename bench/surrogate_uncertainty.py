@@ -33,7 +33,9 @@ from rheograph.analysis import decorrelation_strain  # noqa: E402
 from rheograph.dataset_card import run_cpu_seconds  # noqa: E402
 from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
 from rheograph.learn.predict import predict_file  # noqa: E402
-from rheograph.learn.train import train_folds  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from surrogate_study import train_or_resume  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LABELS = {"eta": "η_r", "pressure": "Π", "z_mu": "Z_μ"}
@@ -46,6 +48,7 @@ def main(argv=None) -> None:
     ap.add_argument("--train-seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--test-seed", type=int, default=3)
     ap.add_argument("--epochs", type=int, default=60)
+    ap.add_argument("--fold-workers", type=int, default=1, help="parallel fold processes (one per core)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "surrogate_uncertainty"))
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
@@ -66,12 +69,11 @@ def main(argv=None) -> None:
                 "trainer.enable_progress_bar=false",
                 "callbacks.early_stopping.patience=1000",
                 "~logger",
+                f"fold_workers={args.fold_workers}",
             ],
         )
     run_dir = Path(args.out)
-    if run_dir.exists():
-        shutil.rmtree(run_dir)
-    train_folds(cfg, run_dir)
+    train_or_resume(cfg, run_dir)
     for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:
         shutil.rmtree(big, ignore_errors=True)
     bundles = sorted(run_dir.glob("fold*.pt"))
