@@ -118,15 +118,21 @@ def test_resume_refuses_another_state_point(tmp_path):
         run_state_point(SimParams(**{**TINY, "stress": 6.0}), path, progress=False)
 
 
-def test_a_recompressed_run_extends_like_the_original(tmp_path):
-    """``recompress`` (lossless, checkpoint kept) leaves a run extendable to the same trajectory."""
-    from rheograph.io.hdf5 import recompress
+def test_finished_runs_are_compressed_at_rest_and_extend_like_raw_ones(tmp_path):
+    """A finished file is compressed (lossless, checkpoint kept); extending it (raw while running, then
+    compressed again) gives the trajectory of a run that was never compressed."""
+    from rheograph.io.hdf5 import is_compressed, rewrite
 
     ref, packed = tmp_path / "ref.h5", tmp_path / "packed.h5"
     longer = SimParams(**{**TINY, "strain": 0.2})
     run_state_point(SimParams(**TINY), ref, progress=False)
+    rewrite(ref, compressed=False)
     run_state_point(SimParams(**TINY), packed, progress=False)
-    recompress(packed)
+    with h5py.File(packed) as h5:
+        assert is_compressed(h5)
+    run_state_point(SimParams(**TINY), packed, progress=False)  # finished: not decompressed
+    with h5py.File(packed) as h5:
+        assert is_compressed(h5)
     run_state_point(longer, ref, progress=False)
     run_state_point(longer, packed, progress=False)
     a, b = read_timeseries(ref), read_timeseries(packed)

@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.hdf5 import PRODUCER, read_run_info, recompress
+from rheograph.io.hdf5 import PRODUCER, read_run_info, rewrite
 
 USABLE = ("completed", "jammed")
 
@@ -89,7 +89,7 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--compress",
         action="store_true",
-        help="rewrite finished runs losslessly compressed (files written before compression was default)",
+        help="rewrite finished runs losslessly compressed (files finished before runs compressed themselves)",
     )
     args = ap.parse_args(argv)
     missing = [d for d in args.directories if not Path(d).is_dir()]
@@ -100,7 +100,7 @@ def main(argv=None) -> None:
         saved = 0
         for entry in index["runs"]:
             if entry["status"] in USABLE:
-                before, after = recompress(entry["path"])
+                before, after = rewrite(entry["path"], compressed=True)
                 saved += before - after
         print(f"compressed: {saved / 1e6:.1f} MB saved")
     write_index(index, args.out)

@@ -17,11 +17,12 @@ import time as wallclock
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
-from rheograph.io.hdf5 import TrajectoryFile
+from rheograph.io.hdf5 import TrajectoryFile, is_compressed, rewrite
 from rheograph.sim.integrator import Simulation, particle_pressure, viscosity
 from rheograph.sim.params import SimParams
 
@@ -80,6 +81,16 @@ def first_jammed_row(time, strain, stress: float, jam_viscosity: float, jam_inte
     return None
 
 
+def compress_at_rest(path: Path) -> None:
+    """Compress a finished trajectory (rheograph.io.hdf5.COMPRESSION: raw while running, compressed at
+    rest); a file already compressed is left as it is, so rerunning a finished state point changes
+    nothing."""
+    with h5py.File(path, "r") as h5:
+        done = is_compressed(h5)
+    if not done:
+        rewrite(path, compressed=True)
+
+
 def run_state_point(
     params: SimParams,
     path: str | Path,
@@ -118,6 +129,8 @@ def run_state_point(
     finally:
         loop.bar.close()
         traj.close()
+    if status in ("completed", "jammed"):
+        compress_at_rest(path)
     if stop.signum is not None:
         # the file is checkpointed and closed; now stop the whole process (and a Hydra sweep with it)
         raise KeyboardInterrupt if stop.signum == signal.SIGINT else SystemExit(128 + stop.signum)

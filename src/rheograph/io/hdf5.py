@@ -48,8 +48,11 @@ SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "p
 RESUMABLE_PARAMS = {"strain", "max_wall_seconds", "checkpoint_wall_seconds", "jam_intervals"}
 
 
-# lossless (gzip + byte shuffle): halves a trajectory file; positions keep float64, since overlaps of
-# ~1e-3 a at coordinates of ~30 a need ~1e-7 relative precision to decide contacts and their CLM state
+# Compressed at rest, raw while running.  gzip + byte shuffle (lossless) halves a finished file; positions
+# keep float64, since overlaps of ~1e-3 a at coordinates of ~30 a need ~1e-7 relative precision to decide
+# contacts and their CLM state.  A file being appended to stays uncompressed: a SIGKILL between flushes
+# can leave a compressed chunk half written, which then fails to decode when the run resumes (the SIGKILL
+# test found it), while a raw chunk keeps its checkpointed rows intact.
 COMPRESSION = dict(compression="gzip", compression_opts=4, shuffle=True)
 
 
@@ -89,33 +92,25 @@ class TrajectoryFile:
             ts = h5.create_group("timeseries")
             for name in TIMESERIES_SCALARS:
                 dtype = np.int64 if name == "steps" else (np.bool_ if name == "jammed" else np.float64)
-                ts.create_dataset(
-                    name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(1024,), **COMPRESSION
-                )
+                ts.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(1024,))
             for name in TIMESERIES_TENSORS:
-                ts.create_dataset(
-                    name, shape=(0, 3), maxshape=(None, 3), dtype=np.float64, chunks=(1024, 3), **COMPRESSION
-                )
+                ts.create_dataset(name, shape=(0, 3), maxshape=(None, 3), dtype=np.float64, chunks=(1024, 3))
             ts.attrs["tensor_components"] = "xx, xy, yy (sigma_zz = 0); stresses in sigma0"
             sn = h5.create_group("snapshots")
             for name in SNAPSHOT_SCALARS:
-                sn.create_dataset(
-                    name, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,), **COMPRESSION
-                )
+                sn.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,))
             sn.create_dataset(
                 "positions",
                 shape=(0, n, 2),
                 maxshape=(None, n, 2),
                 dtype=np.float64,
                 chunks=(1, n, 2),
-                **COMPRESSION,
             )
             sn.create_dataset(
                 "contact_offset",
                 data=np.zeros(1, dtype=np.int64),
                 maxshape=(None,),
                 chunks=(64,),
-                **COMPRESSION,
             )
             sn.create_dataset(
                 "contact_pairs",
@@ -123,18 +118,14 @@ class TrajectoryFile:
                 maxshape=(None, 2),
                 dtype=np.int64,
                 chunks=(1024, 2),
-                **COMPRESSION,
             )
-            sn.create_dataset(
-                "contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,), **COMPRESSION
-            )
+            sn.create_dataset("contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,))
             sn.create_dataset(
                 "contact_stretch",
                 shape=(0, 2),
                 maxshape=(None, 2),
                 dtype=np.float64,
                 chunks=(1024, 2),
-                **COMPRESSION,
             )
         self.h5 = h5py.File(tmp, "r+")
         self.write_checkpoint(state, {})
@@ -165,6 +156,11 @@ class TrajectoryFile:
         if h5.attrs.get("producer") != PRODUCER:
             h5.close()
             raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
+        will_step = "checkpoint" in h5 and float(h5["checkpoint"].attrs["strain"]) < self.params.strain
+        if will_step and is_compressed(h5):  # a finished file, compressed at rest, is extended:
+            h5.close()  # raw again before appending (see COMPRESSION)
+            rewrite(self.path, compressed=False)
+            h5 = h5py.File(self.path, "r+")
         if "checkpoint" not in h5 and "checkpoint_new" in h5:  # interrupted between delete and move
             h5.move("checkpoint_new", "checkpoint")
         if "checkpoint" not in h5:
@@ -288,24 +284,27 @@ def read_run_info(path: str | Path) -> dict:
         }
 
 
-def recompress(path: str | Path) -> tuple[int, int]:
-    """Rewrite a finished trajectory file with ``COMPRESSION`` (lossless; chunking, attributes and the
-    checkpoint kept, so the run can still be extended).  Written to a temporary file and swapped in
-    atomically.  Returns (bytes before, bytes after)."""
+def is_compressed(h5: h5py.File) -> bool:
+    return h5["snapshots/positions"].compression is not None
+
+
+def rewrite(path: str | Path, compressed: bool = True) -> tuple[int, int]:
+    """Rewrite a trajectory file not being written, its chunked datasets with ``COMPRESSION`` (or raw:
+    ``compressed=False``, before a finished run is extended).  Lossless; chunking, attributes and the
+    checkpoint kept.  Written to a temporary file and swapped in atomically.  Returns (bytes before,
+    bytes after)."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
     with h5py.File(path, "r") as src, h5py.File(tmp, "w") as dst:
         if src.attrs.get("producer") != PRODUCER:
             raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
-        if src.attrs.get("status") == "running":
-            raise TrajectoryFileError(f"{path}: status running (a simulation may be writing it)")
         dst.attrs.update(dict(src.attrs))
 
         def copy(name, obj):
             if isinstance(obj, h5py.Group):
                 dst.require_group(name).attrs.update(dict(obj.attrs))
                 return
-            options = COMPRESSION if obj.chunks else {}
+            options = COMPRESSION if (obj.chunks and compressed) else {}
             out = dst.create_dataset(
                 name, data=obj[()], maxshape=obj.maxshape, chunks=obj.chunks, dtype=obj.dtype, **options
             )
