@@ -175,3 +175,58 @@ def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterru
     with h5py.File(ref_file) as h1, h5py.File(cut_file) as h2:
         for key in ("positions", "contact_pairs", "contact_stretch", "viscosity"):
             np.testing.assert_array_equal(h1["snapshots"][key][()], h2["snapshots"][key][()], err_msg=key)
+
+
+def test_tune_with_bad_fixed_overrides_stops_before_the_first_trial(tmp_path):
+    code, out = run(
+        [
+            str(ROOT / "tune.py"),
+            f"train_overrides=['data.files={tmp_path}/nothing*.h5']",
+            "tune.n_trials=2",
+            f"output_root={tmp_path}",
+        ],
+        tmp_path,
+    )
+    assert_one_line_error(code, out, "tune.py: error:", "data.files")
+
+
+def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tmp_path):
+    """SIGKILL train.py once its first fold has finished; the same command into the same run directory
+    keeps that fold (its bundle untouched) and trains the others."""
+    import json
+    import signal
+    import time
+
+    run_dir = tmp_path / "run"
+    cmd = [
+        sys.executable,
+        str(ROOT / "train.py"),
+        f"data.files={Path(tiny_files[0]).parent}/*.h5",
+        "data.phi=null",
+        "data.n_particles=null",
+        "data.split=random",
+        "data.num_folds=3",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "graph.min_strain=0.05",
+        "trainer.max_epochs=40",
+        "trainer.enable_progress_bar=false",
+        "model.hidden=8",
+        "~logger",
+        "report=false",
+        f"hydra.run.dir={run_dir}",
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path)
+    deadline = time.time() + 240
+    while not (run_dir / "fold0_result.json").exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    assert (run_dir / "fold0_result.json").exists() and proc.poll() is None, "fold 0 did not finish first"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (run_dir / "metrics.json").exists()
+    kept = (run_dir / "fold0.pt").read_bytes()
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "fold 0 finished" in done.stdout + done.stderr
+    assert (run_dir / "fold0.pt").read_bytes() == kept
+    folds = json.loads((run_dir / "metrics.json").read_text())["folds"]
+    assert [f["fold"] for f in folds] == [0, 1, 2]

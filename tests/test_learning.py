@@ -191,6 +191,7 @@ def test_load_feature_reproduces_the_simulators_frictional_contacts(tiny_files):
                 )
                 npair = pairs["i"].size
                 frictional = feats["load"][:npair] > np.arcsinh(1.0)
+                np.testing.assert_array_equal(feats["frictional"][:npair], frictional)
                 mine = {(int(a), int(b)) for a, b in zip(pairs["i"][frictional], pairs["j"][frictional])}
                 rows = slice(offsets[k], offsets[k + 1])
                 recorded = sn["contact_pairs"][rows][sn["contact_state"][rows] >= 2]

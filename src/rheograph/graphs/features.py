@@ -23,7 +23,8 @@ Edge features, by name (``EDGE_FEATURES``):
   affine flow per unit shear rate, scaled by delta) — summed by the model's pooling, not recomputed;
 * stress-conditioned (needs the imposed stress, as every simulation and rheometer knows it):
   ``load`` = asinh(F_n / F_CL) of the contact spring F_n = k_n a_bar overlap (0 when apart).  The
-  Critical Load Model makes a contact frictional exactly when F_n > F_CL, i.e. load > asinh(1).
+  Critical Load Model makes a contact frictional exactly when F_n > F_CL, i.e. load > asinh(1):
+  ``frictional`` is that flag (1 for a frictional contact), whose sum over pairs is N Z_mu / 2.
 
 All features are O(1) numbers on purpose; the model standardises them with statistics of its training
 folds anyway.
@@ -48,7 +49,7 @@ PHYSICS_EDGE_FEATURES = (
     "contact_normal",
     "lubrication_shear",
 )
-STRESS_EDGE_FEATURES = ("load",)
+STRESS_EDGE_FEATURES = ("load", "frictional")
 EDGE_FEATURES = PAPER_EDGE_FEATURES + PHYSICS_EDGE_FEATURES + STRESS_EDGE_FEATURES
 
 
@@ -114,6 +115,7 @@ def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params):
         "contact_normal": (overlap * abar * r, 1.0),
         "lubrication_shear": (abar * r * (nx * ny) ** 2 * float(params["delta"]) / lub_gap, 1.0),
         "load": (load, 1.0),
+        "frictional": ((load > np.arcsinh(1.0)).astype(np.float64), 1.0),
     }
     edge_index = np.stack([np.r_[p["i"], p["j"]], np.r_[p["j"], p["i"]]])
     feats = {name: np.r_[value, sign * value] for name, (value, sign) in pair_features.items()}

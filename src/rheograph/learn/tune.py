@@ -64,8 +64,26 @@ def make_objective(cfg: DictConfig, run_root: Path):
     return objective
 
 
+def check_base_config(cfg: DictConfig) -> None:
+    """Bad input in the study's fixed overrides (a glob matching nothing, an invalid option) would fail
+    every trial; it ends the study before the first one instead, as one line (InputError)."""
+    from hydra.utils import instantiate
+
+    from rheograph.learn.train import graph_settings
+
+    train_cfg = compose(config_name="train", overrides=list(cfg.train_overrides))
+    instantiate(train_cfg.data, graph=graph_settings(train_cfg), fold=0, _convert_="all").setup()
+    for name, spec in OmegaConf.to_container(cfg.tune.search_space, resolve=True).items():
+        if spec.get("type") not in ("categorical", "int", "float"):
+            raise InputError(
+                f"search space entry {name}: unknown type {spec.get('type')!r} (categorical, int, float)"
+            )
+
+
 def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     t = cfg.tune
+    if objective is None:
+        check_base_config(cfg)
     study = optuna.create_study(
         study_name=t.study_name,
         storage=t.storage,
