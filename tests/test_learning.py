@@ -410,3 +410,22 @@ def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
     # with graph 0 jammed, its eta_r term drops out: eta_r's loss is that of graph 1 alone
     assert masked.item() != pytest.approx(base.item())
     assert np.isfinite(masked.item()) and masked.item() < 1e3 and only_flowing.item() > 0
+
+
+def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files):
+    """Summed messages, per-area pooling, the edge readout and the graph input: a relabelling of the
+    particles and a reordering of the pairs change nothing."""
+    torch.manual_seed(1)
+    g = snapshot_graphs(tiny_files[2], SETTINGS, 0)[0]
+    model = ResGCN(
+        2, 6, hidden=16, aggr="add", pool="area", dropout=0.0, global_in=1, head_layers=2, edge_readout=True
+    ).eval()
+    perm = torch.randperm(g.num_nodes)
+    inv = torch.empty_like(perm)
+    inv[perm] = torch.arange(perm.numel())
+    order = torch.randperm(g.edge_index.shape[1])
+    batch = torch.zeros(g.num_nodes, dtype=torch.long)
+    u, area = torch.tensor([[np.log(5.0)]], dtype=torch.float32), g.area
+    out = model(g.x, g.edge_index, g.edge_attr, batch, u, area)
+    out_perm = model(g.x[perm], inv[g.edge_index][:, order], g.edge_attr[order], batch, u, area)
+    torch.testing.assert_close(out, out_perm, rtol=1e-5, atol=1e-5)

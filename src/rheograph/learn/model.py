@@ -29,6 +29,9 @@ class ResGCN(nn.Module):
     Edge features are standardised inside the model with buffers fitted on the training folds
     (``set_edge_scaling``), so a saved model maps raw features to predictions.
 
+    With ``edge_readout`` the head also sees the sum over pairs of each standardised edge feature per
+    box area (batch normalised): the targets are such sums (stresses over pairs per area, Z_mu a count).
+
     Shapes: x (N, node_in), edge_attr (E, edge_in), batch (N,), u (G, global_in), area (G,)
     -> (G, out_channels).
     """
@@ -47,6 +50,7 @@ class ResGCN(nn.Module):
         mlp_layers: int = 2,
         global_in: int = 0,
         head_layers: int = 1,
+        edge_readout: bool = False,
     ):
         super().__init__()
         if block not in BLOCKS:
@@ -58,6 +62,10 @@ class ResGCN(nn.Module):
         if num_layers < 1 or hidden < 1 or head_layers < 1:
             raise InputError("model.num_layers, model.hidden and model.head_layers must be >= 1")
         self.block, self.pool_name, self.global_in = block, pool, global_in
+        # edge readout: the sums over pairs of every (standardised) edge feature per box area, batch
+        # normalised, next to the pooled node embedding: the stresses and Z_mu are such sums, which the
+        # head then reads directly instead of through message passing
+        self.edge_readout = nn.BatchNorm1d(edge_in) if edge_readout else None
         self.node_encoder = nn.Linear(node_in, hidden)
         self.edge_encoder = nn.Linear(edge_in, hidden)
         self.register_buffer("edge_mean", torch.zeros(edge_in))
@@ -87,7 +95,7 @@ class ResGCN(nn.Module):
             )
         self.dropout = dropout
         self.pool = POOLS[pool]
-        head, width = [], hidden + global_in
+        head, width = [], hidden + global_in + (edge_in if edge_readout else 0)
         for _ in range(head_layers - 1):
             head += [nn.Linear(width, hidden), nn.ReLU()]
             width = hidden
@@ -99,7 +107,8 @@ class ResGCN(nn.Module):
 
     def forward(self, x, edge_index, edge_attr, batch, u=None, area=None):
         x = self.node_encoder(x)
-        e = self.edge_encoder((edge_attr - self.edge_mean) / self.edge_std)
+        scaled = (edge_attr - self.edge_mean) / self.edge_std
+        e = self.edge_encoder(scaled)
         if self.global_encoder is not None:
             x = x + self.global_encoder(u)[batch]
         if self.block == "res+":
@@ -113,6 +122,10 @@ class ResGCN(nn.Module):
             for layer in self.layers:
                 x = layer(x, edge_index, e)
         pooled = self.pool(x, batch, area) if self.pool_name == "area" else self.pool(x, batch)
+        if self.edge_readout is not None:
+            graphs = int(batch.max()) + 1 if batch.numel() else 0
+            sums = global_add_pool(scaled, batch[edge_index[0]], size=graphs) / area.view(-1, 1)
+            pooled = torch.cat([pooled, self.edge_readout(sums)], dim=1)
         if self.global_in:
             pooled = torch.cat([pooled, u], dim=1)
         return self.head(pooled)

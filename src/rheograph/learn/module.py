@@ -124,6 +124,7 @@ class SurrogateModule(L.LightningModule):
         pool: str = "mean",
         global_in: int = 0,
         head_layers: int = 1,
+        edge_readout: bool = False,
         lr: float = 5e-3,
         weight_decay: float = 0.0,
         loss_weights=(1.0, 1.0, 1.0),
@@ -155,6 +156,7 @@ class SurrogateModule(L.LightningModule):
             3,
             global_in=global_in,
             head_layers=head_layers,
+            edge_readout=edge_readout,
         )
         self.register_buffer("target_mean", torch.zeros(3))
         self.register_buffer("target_std", torch.ones(3))
