@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.hdf5 import PRODUCER, read_run_info, rewrite
+from rheograph.io.hdf5 import PRODUCER, is_compressed, read_run_info, rewrite
 
 USABLE = ("completed", "jammed")
 
@@ -100,6 +100,9 @@ def main(argv=None) -> None:
         saved = 0
         for entry in index["runs"]:
             if entry["status"] in USABLE:
+                with h5py.File(entry["path"], "r") as h5:
+                    if is_compressed(h5):
+                        continue
                 before, after = rewrite(entry["path"], compressed=True)
                 saved += before - after
         print(f"compressed: {saved / 1e6:.1f} MB saved")
