@@ -23,12 +23,11 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-from hydra import compose, initialize_config_dir  # noqa: E402
 
 from rheograph.collect import read_index  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from surrogate_study import train_or_resume  # noqa: E402
+from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (("r2_log_eta", "log η_r"), ("r2_log_pressure", "log Π"), ("r2_z_mu", "Z_μ"))
@@ -59,21 +58,9 @@ def main(argv=None) -> None:
             if (n, round(phi, 4)) not in available:
                 print(f"N = {n}, φ = {phi}: no finished runs in {args.index}: skipped")
                 continue
-            overrides = [
-                f"data.files={args.index}",
-                f"data.phi={phi}",
-                f"data.n_particles={n}",
-                f"data.split={args.split}",
-                "data.batch_size=32",
-                f"trainer.max_epochs={args.epochs}",
-                "trainer.enable_progress_bar=false",
-                "callbacks.early_stopping.patience=1000",
-                "~logger",
-                f"fold_workers={args.fold_workers}",
-                *args.overrides,
-            ]
-            with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-                cfg = compose(config_name="train", overrides=overrides)
+            cfg = benchmark_config(
+                args.index, phi, n, args.split, args.epochs, args.fold_workers, extra=args.overrides
+            )
             run_dir = Path(args.out) / f"N{n}_phi{phi:g}"
             t0 = time.perf_counter()
             train_or_resume(cfg, run_dir)

@@ -59,24 +59,33 @@ def train_or_resume(cfg, run_dir: Path) -> None:
         train_folds(cfg, run_dir)
 
 
-def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
+def benchmark_config(files, phi, n, split, epochs, fold_workers, batch_size=32, extra=()):
+    """The training configuration every surrogate benchmark composes: one (phi, N), a fixed epoch budget
+    (cosine schedule, best validation epoch kept), no logger."""
     overrides = [
-        *VARIANTS[name],
-        f"data.files={args.files}",
-        f"data.phi={args.phi}",
+        f"data.files={files}",
+        f"data.phi={phi}",
+        f"data.n_particles={n}",
         f"data.split={split}",
-        f"data.batch_size={args.batch_size}",
-        f"trainer.max_epochs={args.epochs}",
+        f"data.batch_size={batch_size}",
+        f"trainer.max_epochs={epochs}",
         "trainer.enable_progress_bar=false",
         "callbacks.early_stopping.patience=1000",
         "~logger",
-        f"fold_workers={args.fold_workers}",
-        f"seed={args.seed}",
+        f"fold_workers={fold_workers}",
+        *extra,
     ]
-    if name == "paper":  # the paper's constant learning rate over the same epoch budget
-        overrides.append("model.lr_schedule=constant")
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="train", overrides=overrides)
+        return compose(config_name="train", overrides=overrides)
+
+
+def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
+    extra = [*VARIANTS[name], f"seed={args.seed}"]
+    if name == "paper":  # the paper's constant learning rate over the same epoch budget
+        extra.append("model.lr_schedule=constant")
+    cfg = benchmark_config(
+        args.files, args.phi, 400, split, args.epochs, args.fold_workers, args.batch_size, extra
+    )
     run_dir = out / f"{name}_{split}"
     if args.reuse and (run_dir / "metrics.json").exists():  # a finished run of an earlier invocation
         minutes = run_dir / "train_minutes.txt"

@@ -27,7 +27,6 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import h5py  # noqa: E402
 import numpy as np  # noqa: E402
-from hydra import compose, initialize_config_dir  # noqa: E402
 
 from rheograph.analysis import decorrelation_strain  # noqa: E402
 from rheograph.dataset_card import run_cpu_seconds  # noqa: E402
@@ -35,7 +34,7 @@ from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
 from rheograph.learn.predict import predict_file  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from surrogate_study import train_or_resume  # noqa: E402
+from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LABELS = {"eta": "η_r", "pressure": "Π", "z_mu": "Z_μ"}
@@ -57,21 +56,8 @@ def main(argv=None) -> None:
     test_files = sorted(glob.glob(str(ROOT / pattern.format(args.test_seed))))
     if not train_files or not test_files:
         raise SystemExit(f"no files for N = {args.n}, φ = {args.phi} and the seeds asked for")
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(
-            config_name="train",
-            overrides=[
-                f"data.files=[{','.join(train_files)}]",
-                f"data.phi={args.phi}",
-                f"data.n_particles={args.n}",
-                "data.batch_size=32",
-                f"trainer.max_epochs={args.epochs}",
-                "trainer.enable_progress_bar=false",
-                "callbacks.early_stopping.patience=1000",
-                "~logger",
-                f"fold_workers={args.fold_workers}",
-            ],
-        )
+    files = f"[{','.join(train_files)}]"
+    cfg = benchmark_config(files, args.phi, args.n, "grouped", args.epochs, args.fold_workers)
     run_dir = Path(args.out)
     train_or_resume(cfg, run_dir)
     for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:

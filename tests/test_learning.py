@@ -171,6 +171,23 @@ def test_prediction_is_invariant_to_node_permutation(tiny_files):
     torch.testing.assert_close(out, out_perm, rtol=1e-5, atol=1e-6)
 
 
+def quick_folds(tiny_files, tmp_path) -> list[str]:
+    """Overrides for 3 folds of 3 epochs of a width-8 model on the tiny files (run-directory tests)."""
+    return [
+        f"data.files={Path(tiny_files[0]).parent / '*.h5'}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.phi=null",
+        "data.n_particles=null",
+        "data.split=random",
+        "data.num_folds=3",
+        "graph.min_strain=0.05",
+        "trainer.max_epochs=3",
+        "~logger",
+        "trainer.enable_progress_bar=false",
+        "model.hidden=8",
+    ]
+
+
 def compose_train(overrides):
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         return compose(config_name="train", overrides=overrides)
@@ -303,20 +320,7 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
     from rheograph.errors import InputError
     from rheograph.learn.train import train_folds
 
-    pattern = str(Path(tiny_files[0]).parent / "*.h5")
-    base = [
-        f"data.files={pattern}",
-        f"data.cache_dir={tmp_path / 'cache'}",
-        "data.phi=null",
-        "data.n_particles=null",
-        "data.split=random",
-        "data.num_folds=3",
-        "graph.min_strain=0.05",
-        "trainer.max_epochs=3",
-        "~logger",
-        "trainer.enable_progress_bar=false",
-        "model.hidden=8",
-    ]
+    base = quick_folds(tiny_files, tmp_path)
     run_dir = tmp_path / "run"
     train_folds(compose_train([*base, "fold=1", "report=false"]), run_dir)  # then "killed"
     first = (run_dir / "fold1.pt").stat().st_mtime_ns, (run_dir / "fold1_result.json").read_text()
@@ -333,22 +337,7 @@ def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path
     test predictions equal those of one process training the folds in turn."""
     from rheograph.learn.train import train_folds
 
-    pattern = str(Path(tiny_files[0]).parent / "*.h5")
-    base = [
-        f"data.files={pattern}",
-        f"data.cache_dir={tmp_path / 'cache'}",
-        "data.phi=null",
-        "data.n_particles=null",
-        "data.split=random",
-        "data.num_folds=3",
-        "graph.min_strain=0.05",
-        "trainer.max_epochs=3",
-        "~logger",
-        "trainer.enable_progress_bar=false",
-        "model.hidden=8",
-        "report=false",
-        "threads=1",
-    ]
+    base = [*quick_folds(tiny_files, tmp_path), "report=false", "threads=1"]
     train_folds(compose_train(base), tmp_path / "sequential")
     train_folds(compose_train([*base, "fold_workers=2"]), tmp_path / "parallel")
     a = np.load(tmp_path / "sequential" / "test_predictions.npz")
