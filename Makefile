@@ -33,7 +33,8 @@ $(VENV)/.installed: pyproject.toml | system-packages
 # when already done), then the surrogate trained on the committed phi = 0.76 part of the paper-scale set
 # with whole trajectories held out (its R² and report path printed), then the set's flow curves
 demo: install
-	$(PY) simulate.py sim.phi=0.76 sim.stress=10 sim.strain=0.3 sim.integrator=implicit sim.disp_max=2e-3 \
+	$(PY) simulate.py sim.phi=0.76 sim.stress=10 sim.strain=0.3 sim.steady_state_strain=0.1 \
+	    sim.integrator=implicit sim.disp_max=2e-3 \
 	    output_root=outputs/demo/simulate
 	$(PY) train.py experiment=demo
 	$(PY) -m rheograph.flowcurve data/paper --out outputs/demo/flow_curve

@@ -58,7 +58,11 @@ def train_main(cfg: DictConfig) -> float:
     summary = train_folds(cfg, run_dir)
     for key, value in sorted(summary.items()):
         log.debug("%s = %.4g", key, value)
-    held_out = "held-out trajectories" if cfg.data.split == "grouped" else "random snapshots"
+    held_out = {
+        "grouped": "held-out trajectories",
+        "random": "random snapshots",
+        "phi": "held-out area fractions",
+    }[cfg.data.split]
     log.info(
         "test R² (%s, mean of %d fold(s)): log η_r %.3f, log Π %.3f, Z_μ %.3f | descriptor baseline "
         "%.3f, %.3f, %.3f",

@@ -30,6 +30,11 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
             "Test folds hold **whole trajectories** the model has never seen (the runs of each state point "
             "spread over folds): the honest estimate."
         )
+    elif split == "phi":
+        lines.append(
+            "Each test fold is **one whole area fraction** the model has never seen (leave-one-φ-out: "
+            "interior φ test interpolation, the smallest and largest extrapolation)."
+        )
     else:
         lines.append(
             "Test folds are **random snapshots**: snapshots of one trajectory are correlated, so this "
