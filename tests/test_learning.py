@@ -418,3 +418,21 @@ def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files):
     out = model(g.x, g.edge_index, g.edge_attr, batch, u, area)
     out_perm = model(g.x[perm], inv[g.edge_index][:, order], g.edge_attr[order], batch, u, area)
     torch.testing.assert_close(out, out_perm, rtol=1e-5, atol=1e-5)
+
+
+def test_descriptors_count_the_simulators_contacts_and_sum_the_features(tiny_files):
+    """The baseline's contact number (h < 0 from positions) is the simulator's recorded Z of the snapshot,
+    and its contact-stress descriptor is the per-area sum of the pairs' contact_shear edge features."""
+    from rheograph.graphs.features import snapshot_descriptors
+
+    with h5py.File(tiny_files[2]) as h5:
+        params = json.loads(h5.attrs["params"])
+        radii, sn, lx, ly = h5["radii"][()], h5["snapshots"], h5.attrs["lx"], h5.attrs["ly"]
+        for k in range(0, sn["strain"].size, 4):
+            _, feats, pairs = snapshot_edges(
+                sn["positions"][k], radii, lx, ly, sn["le_offset"][k], 0.5, params
+            )
+            d = snapshot_descriptors(pairs, radii.size, lx * ly)
+            assert d[0] == pytest.approx(sn["z"][k])
+            npair = pairs["i"].size
+            assert d[2] == pytest.approx(feats["contact_shear"][:npair].sum() / (lx * ly))
