@@ -62,9 +62,13 @@ def main(argv=None) -> None:
                 args.index, phi, n, args.split, args.epochs, args.fold_workers, extra=args.overrides
             )
             run_dir = Path(args.out) / f"N{n}_phi{phi:g}"
+            stamp = run_dir / "train_minutes.txt"  # wall minutes of the invocation that trained the folds
+            finished = (run_dir / "metrics.json").exists() and stamp.exists()
             t0 = time.perf_counter()
             train_or_resume(cfg, run_dir)
-            minutes = (time.perf_counter() - t0) / 60
+            if not finished:
+                stamp.write_text(f"{(time.perf_counter() - t0) / 60:.2f}\n")
+            minutes = float(stamp.read_text())
             for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:
                 shutil.rmtree(big, ignore_errors=True)
             folds = json.loads((run_dir / "metrics.json").read_text())["folds"]

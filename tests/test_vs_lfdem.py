@@ -1,0 +1,116 @@
+"""bench/vs_lfdem.py without LF_DEM: the no-binary path, the configuration and parameter files it writes for
+LF_DEM, and where its results go in docs/benchmarks.md."""
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rheograph.sim.params import SimParams
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "bench" / "vs_lfdem.py"
+REFERENCE_PARAMS = ROOT.parent / "shared" / "reference" / "lfdem_phi0.76" / "parameters_clm2d.txt"
+
+
+@pytest.fixture(scope="module")
+def vs_lfdem():
+    spec = importlib.util.spec_from_file_location("vs_lfdem", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_script(*args):
+    env = {k: v for k, v in os.environ.items() if k != "LFDEM_BINARY"}
+    return subprocess.run(
+        [sys.executable, str(SCRIPT), *args], env=env, capture_output=True, text=True, timeout=120
+    )
+
+
+@pytest.mark.parametrize("how", ["none", "missing", "not_executable"])
+def test_without_lfdem_binary_it_says_so_and_exits_zero(tmp_path, how):
+    args = []
+    if how == "missing":
+        args = ["--lfdem", str(tmp_path / "LF_DEM")]
+    elif how == "not_executable":
+        (tmp_path / "LF_DEM").write_text("")
+        args = ["--lfdem", str(tmp_path / "LF_DEM")]
+    proc = run_script(*args)
+    assert proc.returncode == 0, proc.stderr
+    assert "LF_DEM binary not given or not executable" in proc.stdout
+    assert "outside the repository" in proc.stdout
+    assert "Nothing was run" in proc.stdout
+
+
+def test_configuration_file_reads_back_exactly(tmp_path, vs_lfdem):
+    rng = np.random.default_rng(3)
+    lx, ly = 46.7888238643245, 46.7888238643245
+    positions = (rng.random((50, 2)) - 0.5) * lx  # rheograph's box is centred on the origin
+    positions[0] = [-1e-17, -0.5 * ly]  # wraps to [0, 0] (np.mod would round the first to L)
+    radii = np.concatenate([np.ones(33), np.full(17, 1.4)])
+    path = tmp_path / "conf.dat"
+    vs_lfdem.write_lfdem_configuration(path, positions, radii, lx, ly)
+
+    conf = vs_lfdem.read_lfdem_configuration(path)
+    wrapped = vs_lfdem.wrap(positions, lx, ly)
+    assert np.array_equal(conf["positions"], wrapped)
+    assert np.all((wrapped >= 0) & (wrapped < [lx, ly]))
+    shift = np.mod(conf["positions"] - positions + 0.5 * lx, lx) - 0.5 * lx  # a whole number of periods
+    assert np.allclose(shift, 0.0, atol=1e-12)
+    assert np.array_equal(conf["radii"], radii)
+    assert (conf["lx"], conf["ly"]) == (lx, ly)
+    assert conf["vf"] == pytest.approx(np.pi * np.sum(radii**2) / (lx * ly), rel=1e-12)
+    # LF_DEM's text format: two header lines of as many keys as values, then "x y z radius", y = 0
+    lines = path.read_text().splitlines()
+    assert lines[0] == "# np1 np2 vf lx ly lz vf1 vf2 disp"
+    assert lines[1].split()[1:3] == ["33", "17"] and lines[1].split()[5] == "0"
+    assert all(len(line.split()) == 4 and line.split()[1] == "0" for line in lines[2:])
+
+
+def test_configuration_of_simparams_is_what_the_simulation_starts_from(vs_lfdem):
+    from rheograph.sim import Simulation
+
+    params = SimParams(n_particles=64, phi=0.72, seed=5)
+    pos, radii, box = vs_lfdem.initial_configuration(params)
+    state = Simulation(params).state
+    assert np.array_equal(pos, state.positions) and np.array_equal(radii, state.radii)
+    assert box == state.lx == state.ly
+
+
+def test_parameter_file_follows_the_reference(vs_lfdem):
+    if not REFERENCE_PARAMS.exists():
+        pytest.skip("shared/reference not present")
+
+    def entries(text):
+        """{key: value}, numbers as (float, unit suffix): "2e4s" == "20000s"."""
+        body = "\n".join(line for line in text.splitlines() if not line.startswith("/*"))
+        out = {}
+        for entry in body.split(";"):
+            if "=" in entry:
+                key, value = (x.strip() for x in entry.split("="))
+                number = re.match(r"^[-+0-9.eE]+", value)
+                out[key] = (float(number.group()), value[number.end() :]) if number else value
+        return out
+
+    ours = entries(vs_lfdem.lfdem_parameters(SimParams(disp_max=2e-3), 5.0))
+    reference = entries(REFERENCE_PARAMS.read_text())
+    assert ours == reference
+
+
+def test_results_section_goes_before_the_surrogate_section_once(tmp_path, vs_lfdem):
+    doc = tmp_path / "benchmarks.md"
+    doc.write_text(
+        "## 3. Simulator speed\n\n<!-- simulate_speed:start -->\nT\n<!-- simulate_speed:end -->\n\nNotes.\n\n"
+        "## 4. Surrogate accuracy on trajectories it has never seen\n\nS\n"
+    )
+    vs_lfdem.write_section(doc, "vs_lfdem", "first")
+    vs_lfdem.write_section(doc, "vs_lfdem", "second")
+    text = doc.read_text()
+    assert text.count("<!-- vs_lfdem:start -->") == 1 and "first" not in text
+    assert text.index("Notes.") < text.index("second") < text.index("## 4. Surrogate accuracy")
