@@ -26,8 +26,6 @@ from rheograph.sim.params import scheme_settings  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PHASES = ("neighbours", "assembly", "factorisation", "solve", "stress", "update")
-# LF_DEM, same machine kind, single thread (shared/reference/README.md): CPU s per unit strain
-LFDEM_CPU_PER_STRAIN = {(400, 2e-3): "~100", (400, 1e-3): "~130–180", (2000, 2e-3): "~490"}
 
 
 def measure(n, disp, scheme, solver, skin, warmup, window, windows):
@@ -87,10 +85,10 @@ def main() -> None:
         "(OPENBLAS_NUM_THREADS=OMP_THREAD_LIMIT=1); "
         f"φ = 0.76, σ/σ0 = 10; medians of {args.windows} windows after {args.warmup} strain of warm-up.",
         "",
-        "| N | disp_max | integrator | solver | skin | wall s/strain | CPU s/strain | LF_DEM CPU s/strain "
+        "| N | disp_max | integrator | solver | skin | wall s/strain | CPU s/strain "
         "| steps/strain | ms/step | µs/particle-step "
         "| neighbours | assembly | factorise | solve | stress | update |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     cases = [
         (integrator, disp, n, solver, skin)
@@ -104,12 +102,10 @@ def main() -> None:
         # strain window holding about --particle-steps particle-steps (~15 steps per 1e-3 strain)
         window = max(0.01, args.particle_steps / (n * 15.0 / disp * 1e-3) * 1e-3)
         r = measure(n, disp, integrator, solver, skin, args.warmup, window, args.windows)
-        same_scheme = integrator in ("euler", "euler-lagged")
-        ref = LFDEM_CPU_PER_STRAIN.get((n, disp), "–") if same_scheme else "–"
         line = (
             f"| {n} | {disp:g} | {integrator} | {solver} | {skin:g} | {r['wall_per_strain']:.1f} | "
             f"{r['cpu_per_strain']:.1f} | "
-            f"{ref} | {r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
+            f"{r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
             f"{r['us_per_particle_step']:.2f} | "
             + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES)
             + " |"

@@ -1,21 +1,42 @@
-"""Surrogate speed: training and inference throughput (graphs/s) on N = 2000 particle graphs, batch 8 and
-32, peak memory, 2 CPU threads; compared in the same run with a plain PyG DeeperGCN (DeepGCNLayer +
-GENConv as in PyG's ogbn-proteins example) of the same width and depth.  Also: graph-building time per
-snapshot, and the surrogate speed-up over the simulator (one prediction vs producing one decorrelated
-snapshot).
+"""Surrogate cost (issue #9): what training costs, what makes it cheaper, and accuracy against size and speed.
+All on the committed paper-scale set (held-out whole trajectories, ``data.split=grouped``), this machine.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py [--graphs 64] [--sim-strain-per-snapshot 0.5]
+    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py levers    # s/epoch of each speed lever, one fold
+    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py accuracy  # time to accuracy, before/after, N=400/2000
+    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py pareto    # R² vs inference ms and training minutes
+    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py folds     # K-fold wall time: fold processes vs one
+    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py inference # per-snapshot prediction vs simulation
 
-Graphs are relaxed random configurations at phi = 0.76 (same particle and edge counts as sheared
-snapshots: the throughput depends on sizes, not on the physics).  Results replace the marked section of
-docs/benchmarks.md.
+Each subcommand writes its marked section of docs/benchmarks.md (``--no-write``: print only) and keeps its
+raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders from that file.
+
+* ``levers``: seconds per training epoch (median of ``--repeats`` epochs after one warm-up epoch, one
+  thread) of the default model on fold 0's training graphs for one lever at a time: ``torch.compile``
+  (dynamic shapes), batches collated once (fixed batches, order shuffled) instead of every epoch, batch
+  size, and the per-epoch share of collation.
+* ``accuracy``: wall time until the held-out-trajectory R² (log η_r, log Π, Z_μ; the test fold, evaluated
+  after every epoch by a callback whose own time is not counted) first reaches 0.9, 0.95 and 0.99 of its
+  final value (the model of the best validation epoch), for the configuration before the speed levers
+  (constant learning rate, batch 16, early stopping with patience 50 up to 150 epochs) and after (cosine
+  schedule over a fixed budget, the fastest batch size of ``levers``), at N = 400 and 2000.
+* ``pareto``: one fold per model size (layers x width) and input variant, 60 epochs: held-out R² against
+  the inference time per snapshot (graph building + forward pass, batched over the test fold, one thread)
+  and the training minutes; the Pareto front and the paper's 2 x 64 marked in
+  docs/figures/surrogate_pareto.png.
+* ``inference``: predicting every snapshot of a trajectory file in one batched pass against the
+  simulator's CPU seconds per decorrelated snapshot of the same files (the speed-up as a ratio).
+* ``folds``: the full K-fold training (``train.py`` path, report included) in one process with two threads
+  against ``fold_workers=2`` processes with one thread each.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
-import resource
+import shutil
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -24,180 +45,621 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from torch import nn  # noqa: E402
-from torch_geometric.data import Data  # noqa: E402
-from torch_geometric.loader import DataLoader  # noqa: E402
-from torch_geometric.nn import DeepGCNLayer, GENConv, global_mean_pool  # noqa: E402
 
-from rheograph.graphs.features import node_features, snapshot_edges  # noqa: E402
-from rheograph.learn.model import ResGCN, count_parameters  # noqa: E402
-from rheograph.sim.init_config import random_configuration  # noqa: E402
-from rheograph.sim.params import SimParams  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import write_section  # noqa: E402
+from surrogate_study import VARIANTS, benchmark_config  # noqa: E402
+
+from rheograph.learn.module import regression_metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "docs" / "results" / "train_speed"
+SCORES = ("r2_log_eta", "r2_log_pressure", "r2_z_mu")
+LABELS = {"r2_log_eta": "log η_r", "r2_log_pressure": "log Π", "r2_z_mu": "Z_μ"}
+# before the speed levers: the paper's constant learning rate, batch 16, early stopping (patience 50)
+# after: the batch size measured fastest per epoch at each N (``levers``: large N = 2000 batches leave the
+# cache, 8 graphs per batch train 1.4x faster than 32; at N = 400 it makes no difference)
+AFTER_BATCH = {400: 32, 2000: 8}
+BEFORE = ["model.lr_schedule=constant", "model.warmup_epochs=0", "callbacks.early_stopping.patience=50"]
 
 
-class PlainDeeperGCN(nn.Module):
-    """The reference: PyG's ogbn-proteins DeeperGCN pattern, unchanged apart from graph pooling."""
-
-    def __init__(self, node_in, edge_in, hidden, num_layers):
-        super().__init__()
-        self.node_encoder = nn.Linear(node_in, hidden)
-        self.edge_encoder = nn.Linear(edge_in, hidden)
-        self.layers = nn.ModuleList()
-        for _ in range(num_layers):
-            conv = GENConv(hidden, hidden, aggr="softmax", t=1.0, learn_t=True, num_layers=2, norm="layer")
-            norm = nn.LayerNorm(hidden, elementwise_affine=True)
-            self.layers.append(DeepGCNLayer(conv, norm, nn.ReLU(inplace=True), block="res+", dropout=0.1))
-        self.lin = nn.Linear(hidden, 3)
-
-    def forward(self, x, edge_index, edge_attr, batch):
-        x = self.node_encoder(x)
-        e = self.edge_encoder(edge_attr)
-        x = self.layers[0].conv(x, edge_index, e)
-        for layer in self.layers[1:]:
-            x = layer(x, edge_index, e)
-        x = self.layers[0].act(self.layers[0].norm(x))
-        return self.lin(global_mean_pool(x, batch))
+def config(args, n, epochs, batch_size, extra=(), split="grouped", fold_workers=1):
+    return benchmark_config(args.files, args.phi, n, split, epochs, fold_workers, batch_size, list(extra))
 
 
-def build_graphs(n_graphs, n_particles, cutoff):
-    params = SimParams(n_particles=n_particles, phi=0.76)
-    box = params.box_length()
-    graphs, times = [], []
-    configs = [random_configuration(*params.species_counts(), 1.4, box, seed) for seed in range(4)]
-    for k in range(n_graphs):
-        pos, radii = configs[k % len(configs)]
+def setup_fold(cfg, k=0):
+    """(datamodule, module) of fold ``k`` exactly as ``rheograph.learn.train.train_fold`` builds them."""
+    from hydra.utils import instantiate
+
+    from rheograph.learn.train import graph_settings
+
+    settings = graph_settings(cfg)
+    dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
+    dm.setup()
+    module = instantiate(
+        cfg.model,
+        edge_in=len(settings.edge_features),
+        global_in=len(settings.graph_inputs),
+        viscosity_scale=settings.viscosity_scale,
+        pressure_scale=settings.pressure_scale,
+        _convert_="all",
+    )
+    module.set_target_scaling(dm.target_mean, dm.target_std)
+    module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
+    return dm, module
+
+
+def held_out_scores(module, dm) -> dict:
+    from rheograph.learn.train import predict_dataset
+
+    pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
+    flowing = ~meta["jammed"].astype(bool).ravel()
+    metrics = regression_metrics(pred[flowing], true[flowing])
+    return {key: metrics[key] for key in SCORES}
+
+
+class HeldOutCurve:
+    """Lightning callback: held-out R² after every training epoch against training wall seconds (the
+    callback's own evaluation time is excluded)."""
+
+    def __new__(cls, dm):
+        import lightning as L
+
+        class _Curve(L.Callback):
+            def __init__(self):
+                self.rows, self.spent, self.start = [], 0.0, None
+
+            def on_train_start(self, trainer, module):
+                self.start = time.perf_counter()
+
+            def on_validation_epoch_end(self, trainer, module):
+                if trainer.sanity_checking:
+                    return
+                t0 = time.perf_counter()
+                training = module.training
+                scores = held_out_scores(module, dm)
+                module.train(training)
+                self.rows.append(
+                    {"epoch": trainer.current_epoch, "seconds": t0 - self.start - self.spent, **scores}
+                )
+                self.spent += time.perf_counter() - t0
+
+        return _Curve()
+
+
+def fit_fold(cfg, k=0, curve=False):
+    """Train fold ``k``; returns (held-out scores of the best validation epoch, train seconds, curve rows,
+    module, datamodule)."""
+    import lightning as L
+    from hydra.utils import instantiate
+
+    L.seed_everything(int(cfg.seed) + k, workers=True)
+    dm, module = setup_fold(cfg, k)
+    callbacks = [instantiate(c) for c in cfg.callbacks.values()]
+    tracker = HeldOutCurve(dm) if curve else None
+    tmp = Path(tempfile.mkdtemp(prefix="train_speed_"))  # lightning's checkpoints of this fold
+    trainer = instantiate(
+        cfg.trainer,
+        callbacks=callbacks + ([tracker] if tracker else []),
+        logger=False,
+        default_root_dir=str(tmp),
+        enable_model_summary=False,
+    )
+    t0 = time.perf_counter()
+    trainer.fit(module, datamodule=dm)
+    seconds = time.perf_counter() - t0 - (tracker.spent if tracker else 0.0)
+    ckpt = next(c for c in callbacks if hasattr(c, "best_model_path"))
+    state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
+    module.load_state_dict(state)
+    shutil.rmtree(tmp, ignore_errors=True)
+    return held_out_scores(module, dm), seconds, (tracker.rows if tracker else []), module, dm
+
+
+# ---- levers -------------------------------------------------------------------------------------------
+def epoch_seconds(net, batches, repeats, shuffle_batches=True):
+    """Median seconds of one training epoch of ``net`` over ``batches`` (a callable returning the epoch's
+    batches, so that collation can be inside the timed region), Adam, one warm-up epoch."""
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    times = []
+    for _ in range(repeats + 1):
         t0 = time.perf_counter()
-        edge_index, feats, _ = snapshot_edges(pos, radii, box, box, 0.37 * k, cutoff, params.to_dict())
-        edge_attr = np.stack([feats[f] for f in ("gap", "distance", "dx", "dy", "sin", "cos")], axis=1)
-        times.append(time.perf_counter() - t0)
-        graphs.append(
-            Data(
-                x=torch.from_numpy(node_features(radii, 1.4)),
-                edge_index=torch.from_numpy(edge_index),
-                edge_attr=torch.from_numpy(edge_attr).float(),
-                y=torch.randn(1, 3),
-            )
-        )
-    return graphs, float(np.median(times[1:]))
-
-
-def throughput(model, graphs, batch_size, repeats):
-    loader = DataLoader(graphs, batch_size=batch_size, shuffle=False)
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-    model.train()
-    for batch in loader:  # warm-up
-        loss = nn.functional.smooth_l1_loss(
-            model(batch.x, batch.edge_index, batch.edge_attr, batch.batch), batch.y
-        )
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        break
-    train_rates, infer_rates = [], []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for batch in loader:
-            out = model(batch.x, batch.edge_index, batch.edge_attr, batch.batch)
-            loss = nn.functional.smooth_l1_loss(out, batch.y)
+        for b in batches():
+            z = net(b.x, b.edge_index, b.edge_attr, b.batch, b.u, b.area)
+            loss = torch.nn.functional.smooth_l1_loss(z, b.y)
             opt.zero_grad()
             loss.backward()
             opt.step()
-        train_rates.append(len(graphs) / (time.perf_counter() - t0))
-        model.eval()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times[1:] if repeats else times))
+
+
+def levers(args) -> list[str]:
+    from torch_geometric.loader import DataLoader
+
+    torch.set_num_threads(1)
+    rows = []
+    for n in args.n:
+        cfg = config(args, n, 1, 32)
+        dm, module = setup_fold(cfg)
+        train = dm.dataset[torch.as_tensor(dm.train_idx)]
+        net = module.net.train()
+        for batch_size in args.batch_sizes:
+            loader = DataLoader(train, batch_size=batch_size, shuffle=True)
+            fresh = epoch_seconds(net, lambda loader=loader: loader, args.repeats)
+            fixed = list(loader)
+            rng = np.random.default_rng(0)
+            once = epoch_seconds(
+                net, lambda f=fixed, r=rng: [f[i] for i in r.permutation(len(f))], args.repeats
+            )
+            t0 = time.perf_counter()
+            for _ in range(args.repeats):
+                list(loader)
+            collate = (time.perf_counter() - t0) / args.repeats
+            rows.append(
+                dict(n=n, lever=f"batch {batch_size}, collated every epoch", seconds=fresh, graphs=len(train))
+            )
+            rows.append(
+                dict(n=n, lever=f"batch {batch_size}, collated once", seconds=once, graphs=len(train))
+            )
+            rows.append(
+                dict(n=n, lever=f"batch {batch_size}: collation alone", seconds=collate, graphs=len(train))
+            )
+            print(rows[-3:], flush=True)
+        if args.compile:
+            fixed = list(DataLoader(train, batch_size=32, shuffle=True))
+            t0 = time.perf_counter()
+            compiled = torch.compile(net, dynamic=True)
+            first = epoch_seconds(compiled, lambda f=fixed: f, 0)
+            rows.append(
+                dict(
+                    n=n,
+                    lever="batch 32, torch.compile(dynamic=True): first epoch (compiling)",
+                    seconds=first,
+                    graphs=len(train),
+                )
+            )
+            steady = epoch_seconds(compiled, lambda f=fixed: f, args.repeats)
+            rows.append(
+                dict(n=n, lever="batch 32, torch.compile(dynamic=True)", seconds=steady, graphs=len(train))
+            )
+            print(rows[-2:], f"{time.perf_counter() - t0:.0f} s", flush=True)
+    return rows
+
+
+def render_levers(rows, args) -> str:
+    lines = [
+        "Seconds per training epoch of the default model (`model=resgcn_physics`, width 64, 2 layers) over "
+        "fold 0's training graphs of φ = 0.76, one torch thread, median of "
+        f"{args.repeats} epochs after a warm-up epoch.",
+        "",
+        "| N | lever | training graphs | s/epoch | graphs/s |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['n']} | {r['lever']} | {r['graphs']} | {r['seconds']:.2f} | "
+            f"{r['graphs'] / r['seconds']:.0f} |"
+        )
+    lines += ["", f"Command: `{command_line()}`"]
+    return "\n".join(lines)
+
+
+# ---- time to accuracy -----------------------------------------------------------------------------------
+def accuracy(args) -> list[dict]:
+    torch.set_num_threads(1)
+    rows = []
+    for n in args.n:
+        after_batch = AFTER_BATCH.get(n, 32)
+        for label, epochs, batch, extra in (
+            ("before", args.before_epochs, 16, BEFORE),
+            ("after", args.epochs, after_batch, []),
+        ):
+            cfg = config(args, n, epochs, batch, extra)
+            scores, seconds, curve, _, dm = fit_fold(cfg, 0, curve=True)
+            rows.append(
+                dict(n=n, label=label, final=scores, seconds=seconds, curve=curve, graphs=len(dm.dataset))
+            )
+            print(n, label, scores, f"{seconds:.0f} s, {len(curve)} epochs", flush=True)
+    return rows
+
+
+def time_to(curve, key, target):
+    for row in curve:
+        if row[key] >= target:
+            return row["seconds"]
+    return float("nan")
+
+
+def render_accuracy(rows, args) -> str:
+    lines = [
+        f"Fold 0 of 5 (held-out whole trajectories), φ = {args.phi}, one torch thread.  *before*: constant "
+        "learning rate, batch 16, early stopping with patience 50 (at most "
+        f"{args.before_epochs} epochs); *after*: cosine schedule over {args.epochs} epochs, batch "
+        + " / ".join(f"{b} (N = {n})" for n, b in AFTER_BATCH.items())
+        + ".  "
+        "Final = held-out R² of the best validation epoch; t(x) = training wall seconds until the held-out "
+        "R² first reaches x × final.",
+        "",
+        "| N | graphs | config | epochs run | train s | final R² log η_r / log Π / Z_μ "
+        "| t(0.9) s | t(0.95) s | t(0.99) s (slowest target) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        final = " / ".join(f"{r['final'][k]:.3f}" for k in SCORES)
+        times = []
+        for frac in (0.9, 0.95, 0.99):
+            per = [time_to(r["curve"], k, frac * r["final"][k]) for k in SCORES]
+            times.append("–" if any(np.isnan(per)) else f"{max(per):.0f}")
+        lines.append(
+            f"| {r['n']} | {r['graphs']} | {r['label']} | {len(r['curve'])} | {r['seconds']:.0f} | {final} | "
+            + " | ".join(times)
+            + " |"
+        )
+    lines += [
+        "",
+        "Figure: [figures/time_to_accuracy.png](figures/time_to_accuracy.png).",
+        "",
+        f"Command: `{command_line()}`",
+    ]
+    plot_accuracy(rows)
+    return "\n".join(lines)
+
+
+def plot_accuracy(rows) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ns = sorted({r["n"] for r in rows})
+    fig, axes = plt.subplots(len(ns), 3, figsize=(12, 3.3 * len(ns)), squeeze=False)
+    for i, n in enumerate(ns):
+        for j, key in enumerate(SCORES):
+            ax = axes[i, j]
+            for r in (r for r in rows if r["n"] == n):
+                t = [c["seconds"] / 60 for c in r["curve"]]
+                ax.plot(t, [c[key] for c in r["curve"]], label=r["label"])
+            ax.set_ylim(0.5 if key != "r2_log_eta" else 0.0, 1.0)
+            ax.set_title(f"N = {n}: R² {LABELS[key]} (held-out)")
+            ax.set_xlabel("training minutes (1 thread)")
+            ax.legend()
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "figures" / "time_to_accuracy.png", dpi=110)
+
+
+# ---- accuracy against model size and inference time ----------------------------------------------------
+def inference_ms(module, dm, repeats=3) -> float:
+    """Milliseconds per snapshot of one batched forward pass over the test fold (batch 64, one thread)."""
+    from torch_geometric.loader import DataLoader
+
+    test = dm.dataset[torch.as_tensor(dm.test_idx)]
+    batches = list(DataLoader(test, batch_size=64))
+    module.eval()
+    times = []
+    with torch.no_grad():
+        for _ in range(repeats + 1):
+            t0 = time.perf_counter()
+            for b in batches:
+                module(b)
+            times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times[1:])) / len(test)
+
+
+def graph_build_ms(dm, repeats=3) -> float:
+    """Milliseconds per snapshot to read a test trajectory file and turn its snapshots into graphs (edges,
+    features, descriptors), median of ``repeats`` passes after a warm-up."""
+    from rheograph.graphs.dataset import snapshot_graphs
+
+    path = dm.files[int(dm.dataset.run_id[int(dm.test_idx[0])])]
+    times = []
+    for _ in range(repeats + 1):
         t0 = time.perf_counter()
-        with torch.no_grad():
-            for batch in loader:
-                model(batch.x, batch.edge_index, batch.edge_attr, batch.batch)
-        infer_rates.append(len(graphs) / (time.perf_counter() - t0))
-        model.train()
-    return float(np.median(train_rates)), float(np.median(infer_rates))
+        graphs = snapshot_graphs(path, dm.graph, 0)
+        times.append((time.perf_counter() - t0) / len(graphs))
+    return 1e3 * float(np.median(times[1:]))
+
+
+def pareto(args) -> list[dict]:
+    torch.set_num_threads(1)
+    rows = []
+    for spec in args.models:
+        variant, _, size = spec.partition(":")
+        layers, width = (int(v) for v in size.split("x"))
+        extra = [*VARIANTS[variant], f"model.num_layers={layers}", f"model.hidden={width}"]
+        if variant == "paper":
+            extra.append("model.lr_schedule=constant")
+        cfg = config(args, 400, args.epochs, 32, extra)
+        scores, seconds, _, module, dm = fit_fold(cfg, 0)
+        from rheograph.learn.model import count_parameters
+
+        rows.append(
+            dict(
+                variant=variant,
+                layers=layers,
+                width=width,
+                parameters=count_parameters(module),
+                scores=scores,
+                train_minutes=seconds / 60,
+                forward_ms=inference_ms(module, dm),
+                build_ms=graph_build_ms(dm),
+            )
+        )
+        print(rows[-1], flush=True)
+    return rows
+
+
+def pareto_front(points) -> list[int]:
+    """Indices of the points not dominated in (cost lower, score higher)."""
+    front = []
+    for i, (c, s) in enumerate(points):
+        if not any((c2 <= c and s2 >= s) and (c2, s2) != (c, s) for c2, s2 in points):
+            front.append(i)
+    return front
+
+
+def render_pareto(rows, args) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7))
+    markers = {"physics": "o", "physics_positions": "s", "paper": "^"}
+    for j, key in enumerate(SCORES):
+        for i, cost in enumerate(("ms", "train_minutes")):
+            ax = axes[i, j]
+            xs = [r["forward_ms"] + r["build_ms"] if cost == "ms" else r[cost] for r in rows]
+            for r, x in zip(rows, xs):
+                ax.scatter(
+                    x,
+                    r["scores"][key],
+                    marker=markers.get(r["variant"], "o"),
+                    color="k" if (r["layers"], r["width"]) == (2, 64) else "tab:blue",
+                )
+                ax.annotate(f"{r['layers']}×{r['width']}", (x, r["scores"][key]), fontsize=7)
+            phys = [k for k, r in enumerate(rows) if r["variant"] == "physics"]
+            front = [phys[k] for k in pareto_front([(xs[k], rows[k]["scores"][key]) for k in phys])]
+            front.sort(key=lambda k: xs[k])
+            ax.plot([xs[k] for k in front], [rows[k]["scores"][key] for k in front], "r--", lw=1)
+            ax.set_xscale("log")
+            ax.set_xlabel(
+                "ms per snapshot (build + forward)" if cost == "ms" else "training minutes (1 fold, 1 thread)"
+            )
+            ax.set_ylabel(f"held-out R² {LABELS[key]}")
+    fig.suptitle(
+        "fold 0, φ = 0.76, N = 400; circles: physics + σ, squares: physics positions only, "
+        "triangles: paper; black: the paper's 2×64; red: Pareto front (physics)",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "figures" / "surrogate_pareto.png", dpi=110)
+    lines = [
+        f"Fold 0 of 5 (held-out whole trajectories), φ = {args.phi}, N = 400, {args.epochs} epochs (cosine; "
+        "the paper variant with its constant rate), batch 32, one torch thread.  ms per snapshot = graph "
+        "building + forward pass batched over the test fold (batch 64).  The paper's size is 2 × 64.",
+        "",
+        "| inputs | layers × width | parameters | R² log η_r | R² log Π | R² Z_μ | build ms | forward ms "
+        "| train min |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        s = r["scores"]
+        lines.append(
+            f"| {r['variant']} | {r['layers']} × {r['width']} | {r['parameters']} | {s['r2_log_eta']:.3f} | "
+            f"{s['r2_log_pressure']:.3f} | {s['r2_z_mu']:.3f} | {r['build_ms']:.2f} | "
+            f"{r['forward_ms']:.2f} | {r['train_minutes']:.1f} |"
+        )
+    lines += [
+        "",
+        "Figure: [figures/surrogate_pareto.png](figures/surrogate_pareto.png).",
+        "",
+        f"Command: `{command_line()}`",
+    ]
+    return "\n".join(lines)
+
+
+# ---- speed-up over the simulator ------------------------------------------------------------------------
+def simulator_seconds_per_snapshot(path) -> float:
+    """CPU seconds the simulator spent per decorrelated snapshot of one run: its recorded CPU s/strain x
+    the 1/e decorrelation strain of log eta_r over the steady window (at least one output interval)."""
+    import h5py
+
+    from rheograph.analysis import decorrelation_strain
+    from rheograph.dataset_card import run_cpu_seconds
+
+    with h5py.File(path, "r") as h5:
+        strain = float(h5["checkpoint"].attrs["strain"])
+        ts = h5["timeseries"]
+        steady = ts["strain"][()] >= 1.0
+        interval = float(h5.attrs["param_output_interval"])
+        tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
+    return run_cpu_seconds(path) / strain * max(tau, interval)
+
+
+def inference(args) -> list[dict]:
+    """Per N: ms per snapshot to predict every snapshot of a trajectory file in one batched pass (read +
+    graph building + forward; one model and the 5-fold ensemble), against the simulator's CPU seconds per
+    decorrelated snapshot of the same files."""
+    from torch_geometric.loader import DataLoader
+
+    from rheograph.graphs.dataset import snapshot_graphs
+
+    torch.set_num_threads(1)
+    rows = []
+    for n in args.n:
+        dm, module = setup_fold(config(args, n, 1, 32))
+        module.eval()
+        files = sorted({dm.files[int(dm.dataset.run_id[int(i)])] for i in dm.test_idx})[: args.files_per_n]
+        snapshot_graphs(files[0], dm.graph, 0)  # numba compilation outside the timed region
+        build, forward, count, sim = 0.0, 0.0, 0, []
+        for path in files:
+            t0 = time.perf_counter()
+            graphs = snapshot_graphs(path, dm.graph, 0)
+            t1 = time.perf_counter()
+            with torch.no_grad():
+                for b in DataLoader(graphs, batch_size=64):
+                    module(b)
+            build += t1 - t0
+            forward += time.perf_counter() - t1
+            count += len(graphs)
+            sim.append(simulator_seconds_per_snapshot(path))
+        one = (build + forward) / count
+        ensemble = (build + 5 * forward) / count
+        rows.append(
+            dict(
+                n=n,
+                files=len(files),
+                snapshots=count,
+                build_ms=1e3 * build / count,
+                forward_ms=1e3 * forward / count,
+                simulator_s=float(np.median(sim)),
+                speedup_one=float(np.median(sim)) / one,
+                speedup_ensemble=float(np.median(sim)) / ensemble,
+            )
+        )
+        print(rows[-1], flush=True)
+    return rows
+
+
+def render_inference(rows, args) -> str:
+    lines = [
+        f"φ = {args.phi}, default model (2 × 64), one thread: every snapshot of a trajectory file predicted "
+        "in one pass (read + graph building, batched forward, batch 64), test-fold files of fold 0.  "
+        "Simulator: the same files' recorded CPU s/strain × the 1/e decorrelation strain of log η_r "
+        "(median over the files; implicit, disp_max 2e-3).",
+        "",
+        "| N | files | snapshots | build ms | forward ms (1 model) | simulator CPU s per decorrelated "
+        "snapshot | speed-up, 1 model | speed-up, 5-model ensemble |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['n']} | {r['files']} | {r['snapshots']} | {r['build_ms']:.2f} | {r['forward_ms']:.2f} | "
+            f"{r['simulator_s']:.2f} | {r['speedup_one']:.0f}× | {r['speedup_ensemble']:.0f}× |"
+        )
+    lines += ["", f"Command: `{command_line()}`"]
+    return "\n".join(lines)
+
+
+# ---- whole K-fold runs ------------------------------------------------------------------------------------
+def folds(args) -> list[dict]:
+    from rheograph.learn.train import train_folds
+
+    rows = []
+    for n in args.n:
+        for workers in args.workers:
+            extra = ["threads=2"] if workers == 1 else []
+            cfg = config(args, n, args.epochs, 32, extra, fold_workers=workers)
+            run_dir = RESULTS / f"folds_n{n}_w{workers}"
+            shutil.rmtree(run_dir, ignore_errors=True)
+            t0 = time.perf_counter()
+            summary = train_folds(cfg, run_dir)
+            minutes = (time.perf_counter() - t0) / 60
+            split = json.loads((run_dir / "fold0_split.json").read_text())
+            graphs = len(split["train"]) + len(split["val"]) + len(split["test"])
+            rows.append(
+                dict(
+                    n=n,
+                    workers=workers,
+                    minutes=minutes,
+                    graphs=graphs,
+                    scores={k: summary[f"test/{k}"] for k in SCORES},
+                )
+            )
+            print(rows[-1], flush=True)
+            shutil.rmtree(run_dir, ignore_errors=True)
+    return rows
+
+
+def render_folds(rows, args) -> str:
+    lines = [
+        f"All 5 folds (held-out whole trajectories, {args.epochs} epochs, cosine, batch 32), φ = {args.phi}, "
+        "the `train.py` path (baselines, bundles and report included), wall minutes on this 2-core machine.  "
+        "Minutes per 380 graphs scales the measured time linearly with the number of graphs (the paper's "
+        "set size).",
+        "",
+        "| N | graphs | processes × threads | wall min | min per 380 graphs "
+        "| mean R² log η_r / log Π / Z_μ |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        layout = "1 × 2" if r["workers"] == 1 else f"{r['workers']} × 1"
+        final = " / ".join(f"{r['scores'][k]:.3f}" for k in SCORES)
+        lines.append(
+            f"| {r['n']} | {r['graphs']} | {layout} | {r['minutes']:.1f} | "
+            f"{r['minutes'] * 380 / r['graphs']:.1f} | {final} |"
+        )
+    lines += ["", f"Command: `{command_line()}`"]
+    return "\n".join(lines)
+
+
+def command_line() -> str:
+    return "python bench/train_speed.py " + " ".join(
+        a for a in sys.argv[1:] if a not in ("--reuse", "--no-write")
+    )
+
+
+RUNNERS = {
+    "levers": (levers, render_levers),
+    "accuracy": (accuracy, render_accuracy),
+    "pareto": (pareto, render_pareto),
+    "folds": (folds, render_folds),
+    "inference": (inference, render_inference),
+}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--graphs", type=int, default=64)
-    ap.add_argument("--n-particles", type=int, default=2000)
-    ap.add_argument("--hidden", type=int, default=64)
-    ap.add_argument("--layers", type=int, default=2)
+    ap.add_argument("what", choices=sorted(RUNNERS))
+    ap.add_argument("--files", default="data/paper/index.json")
+    ap.add_argument("--phi", type=float, default=0.76)
+    ap.add_argument("--n", type=int, nargs="+", default=[400, 2000])
+    ap.add_argument("--epochs", type=int, default=60)
+    ap.add_argument("--before-epochs", type=int, default=150)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--batch-sizes", type=int, nargs="+", default=[16, 32, 64])
+    ap.add_argument("--no-compile", dest="compile", action="store_false")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--files-per-n", type=int, default=6, help="inference: trajectory files timed per N")
     ap.add_argument(
-        "--sim-seconds-per-strain",
-        type=float,
-        default=None,
-        help="simulator wall s/strain at this N (default: measured value from docs)",
+        "--models",
+        nargs="+",
+        default=[
+            "physics:1x32",
+            "physics:2x16",
+            "physics:2x32",
+            "physics:2x64",
+            "physics:4x64",
+            "physics:2x128",
+            "physics_positions:2x64",
+            "paper:2x64",
+        ],
+        help="variant:LAYERSxWIDTH",
     )
-    ap.add_argument(
-        "--sim-strain-per-snapshot", type=float, default=0.5, help="strain between decorrelated snapshots"
-    )
+    ap.add_argument("--reuse", action="store_true", help="render the stored results again, no training")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
-    torch.set_num_threads(args.threads)
-    torch.manual_seed(0)
-    graphs, build_time = build_graphs(args.graphs, args.n_particles, 0.5)
-    edges = np.mean([g.edge_index.shape[1] for g in graphs])
-    rows = []
-    for name, model in (
-        ("rheograph ResGCN (batch norm)", ResGCN(2, 6, args.hidden, args.layers)),
-        ("plain PyG DeeperGCN (layer norm)", PlainDeeperGCN(2, 6, args.hidden, args.layers)),
-    ):
-        for bs in (8, 32):
-            rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-            train, infer = throughput(model, graphs, bs, args.repeats)
-            rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-            rows.append((name, count_parameters(model), bs, train, infer, rss1 / 1024, (rss1 - rss0) / 1024))
-            print(rows[-1], flush=True)
-    model = ResGCN(2, 6, args.hidden, args.layers).eval()
-    g = graphs[0]
-    batch = torch.zeros(g.num_nodes, dtype=torch.long)
-    with torch.no_grad():
-        times = []
-        for _ in range(20):
-            t0 = time.perf_counter()
-            model(g.x, g.edge_index, g.edge_attr, batch)
-            times.append(time.perf_counter() - t0)
-    predict_one = float(np.median(times)) + build_time
-    lines = (
-        [
-            f"{args.graphs} graphs of N = {args.n_particles} particles (mean {edges:.0f} directed edges, "
-            "gap cut-off 0.5a), "
-            f"{args.threads} torch threads, OMP_WAIT_POLICY=PASSIVE, medians of {args.repeats} passes.",
-            "",
-            "| model | parameters | batch | train graphs/s | inference graphs/s | peak RSS MiB "
-            "| RSS growth MiB |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        + [f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.0f} | {r[6]:.0f} |" for r in rows]
-        + [
-            "",
-            "Graph building (numba cell list with Lees–Edwards images + features): "
-            f"{1e3 * build_time:.2f} ms per "
-            f"N = {args.n_particles} snapshot (median).",
-            f"Predicting one snapshot (graph build + forward pass, batch 1): {1e3 * predict_one:.1f} ms.",
-        ]
-    )
-    if args.sim_seconds_per_strain:
-        produce = args.sim_seconds_per_strain * args.sim_strain_per_snapshot
-        lines.append(
-            f"Simulator: {args.sim_seconds_per_strain:.0f} s/strain at this N → one decorrelated snapshot "
-            f"every {args.sim_strain_per_snapshot} strain costs {produce:.0f} s: speed-up "
-            f"{produce / predict_one:.0f}× for the surrogate."
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    run, render = RUNNERS[args.what]
+    store = RESULTS / f"{args.what}.json"
+    if args.reuse:
+        saved = json.loads(store.read_text())
+        rows, args = saved["rows"], argparse.Namespace(**{**vars(args), **saved["args"]})
+    else:
+        rows = run(args)
+        store.write_text(
+            json.dumps(
+                {
+                    "args": {k: v for k, v in vars(args).items() if k not in ("reuse", "no_write")},
+                    "rows": rows,
+                },
+                indent=1,
+            )
         )
-    lines += [
-        "",
-        "Command: `python bench/train_speed.py "
-        + " ".join(
-            f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k != "no_write" and v is not None
-        )
-        + "`",
-    ]
-    print("\n".join(lines))
+    text = render(rows, args)
+    print(text)
     if not args.no_write:
-        from simulate_speed import write_section
-
-        write_section(ROOT / "docs" / "benchmarks.md", "train_speed", "\n".join(lines))
+        write_section(ROOT / "docs" / "benchmarks.md", f"train_speed_{args.what}", text)
 
 
 if __name__ == "__main__":
