@@ -92,7 +92,8 @@ def write(results: dict, args) -> None:
     protocol = "whole trajectories held out" if args.split == "grouped" else "random snapshots"
     lines = [
         f"{args.split} split ({protocol}), "
-        f"5 folds, {args.epochs} epochs, default model (graph=physics, model=resgcn_physics"
+        f"5 folds, {args.epochs} epochs, batch 32 (N = 400) / 8 (N = 2000), default model "
+        "(graph=physics, model=resgcn_physics"
         + (", " + " ".join(args.overrides) if args.overrides else "")
         + "); mean ± std over test folds.  Baseline: gradient-boosted trees on physics descriptors + log σ, "
         "same folds.  Paper: the seed paper's reported values (random split).",

@@ -59,9 +59,13 @@ def train_or_resume(cfg, run_dir: Path) -> None:
         train_folds(cfg, run_dir)
 
 
-def benchmark_config(files, phi, n, split, epochs, fold_workers, batch_size=32, extra=()):
+def benchmark_config(files, phi, n, split, epochs, fold_workers, batch_size=None, extra=()):
     """The training configuration every surrogate benchmark composes: one (phi, N), a fixed epoch budget
-    (cosine schedule, best validation epoch kept), no logger."""
+    (cosine schedule, best validation epoch kept), no logger.  Batch size (default): 32 graphs at
+    N < 2000, 8 at N >= 2000 — the fastest per epoch (docs/benchmarks.md §5: batches of 32 N = 2000
+    graphs leave the cache and train 1.4x slower)."""
+    if batch_size is None:
+        batch_size = 8 if n >= 2000 else 32
     overrides = [
         f"data.files={files}",
         f"data.phi={phi}",

@@ -143,7 +143,7 @@ def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterru
             "sim=tiny",
             "sim.phi=0.76",
             "sim.stress=20",
-            "sim.strain=1.0",
+            "sim.strain=2.0",  # ~6 s of stepping: three kills of <= 1.5 s of progress each fit in
             "sim.checkpoint_wall_seconds=0.3",
             f"output_root={root}",
             "progress=false",
@@ -157,7 +157,13 @@ def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterru
         proc = subprocess.Popen(
             command(tmp_path / "cut"), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
         )
-        time.sleep(rng.uniform(3.0, 6.0))  # start-up (imports, numba cache) takes ~2-3 s
+        # kill while stepping, not during start-up (imports, numba cache: 2-3 s, machine-dependent): the
+        # trajectory file appears when stepping begins; then a random moment between checkpoints
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and not list((tmp_path / "cut").glob("*/trajectory.h5")):
+            assert time.monotonic() < deadline, "simulate.py did not start stepping within 120 s"
+            time.sleep(0.05)
+        time.sleep(rng.uniform(0.2, 1.5))
         if proc.poll() is None:
             proc.send_signal(signal.SIGKILL)
             killed += 1
