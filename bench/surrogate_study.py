@@ -10,7 +10,8 @@ Variants (config groups of conf/): ``paper`` = graph=paper model=resgcn (the see
 features, softmax aggregation, mean pooling, positions only); ``physics_positions`` = physics-aware edge
 features, positions only; ``physics`` = physics-aware features + imposed stress (graph input and CLM
 load); ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
-stress-like readout).  Every run trains the K folds with the same epochs, batch size and seed.
+stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation.
+Every run trains the K folds with the same epochs, batch size and seed.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ VARIANTS = {
     "physics_positions": ["graph=physics_positions", "model=resgcn_physics"],
     "physics": ["graph=physics", "model=resgcn_physics"],
     "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
+    "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
 }
 COLUMNS = [
     ("r2_log_eta", "R² log η_r"),

@@ -13,7 +13,7 @@ raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-render
 * ``levers``: seconds per training epoch (median of ``--repeats`` epochs after one warm-up epoch, one
   thread) of the default model on fold 0's training graphs for one lever at a time: ``torch.compile``
   (dynamic shapes), batches collated once (fixed batches, order shuffled) instead of every epoch, batch
-  size, and the per-epoch share of collation.
+  size, layer instead of batch normalisation, and the per-epoch share of collation.
 * ``accuracy``: wall time until the held-out-trajectory R² (log η_r, log Π, Z_μ; the test fold, evaluated
   after every epoch by a callback whose own time is not counted) first reaches 0.9, 0.95 and 0.99 of its
   final value (the model of the best validation epoch), for the configuration before the speed levers
@@ -202,6 +202,14 @@ def levers(args) -> list[str]:
                 dict(n=n, lever=f"batch {batch_size}: collation alone", seconds=collate, graphs=len(train))
             )
             print(rows[-3:], flush=True)
+        # normalisation layer: layer norm per node (DeeperGCN) instead of batch norm (the paper's)
+        _, layer_norm = setup_fold(config(args, n, 1, 32, ["model.norm=layer"]))
+        loader = DataLoader(train, batch_size=32, shuffle=True)
+        seconds = epoch_seconds(layer_norm.net.train(), lambda loader=loader: loader, args.repeats)
+        rows.append(
+            dict(n=n, lever="batch 32, layer norm instead of batch norm", seconds=seconds, graphs=len(train))
+        )
+        print(rows[-1], flush=True)
         if args.compile:
             fixed = list(DataLoader(train, batch_size=32, shuffle=True))
             t0 = time.perf_counter()
@@ -399,7 +407,7 @@ def render_pareto(rows, args) -> str:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 3, figsize=(13, 7))
-    markers = {"physics": "o", "physics_positions": "s", "paper": "^"}
+    markers = {"physics": "o", "physics_positions": "s", "paper": "^", "physics_layer_norm": "D"}
     for j, key in enumerate(SCORES):
         for i, cost in enumerate(("ms", "train_minutes")):
             ax = axes[i, j]
@@ -422,8 +430,8 @@ def render_pareto(rows, args) -> str:
             )
             ax.set_ylabel(f"held-out R² {LABELS[key]}")
     fig.suptitle(
-        "fold 0, φ = 0.76, N = 400; circles: physics + σ, squares: physics positions only, "
-        "triangles: paper; black: the paper's 2×64; red: Pareto front (physics)",
+        "fold 0, φ = 0.76, N = 400; circles: physics + σ, diamond: physics + σ with layer norm, squares: "
+        "physics positions only, triangles: paper; black: the paper's 2×64; red: Pareto front (physics)",
         fontsize=9,
     )
     fig.tight_layout()
@@ -448,7 +456,9 @@ def render_pareto(rows, args) -> str:
         "",
         "Figure: [figures/surrogate_pareto.png](figures/surrogate_pareto.png).",
         "",
-        f"Command: `{command_line()}`",
+        "Command (rows accumulate in docs/results/train_speed/pareto.json): "
+        "`python bench/train_speed.py pareto "
+        f"--models {' '.join(args.models)}`",
     ]
     return "\n".join(lines)
 
@@ -618,7 +628,7 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--before-epochs", type=int, default=150)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--batch-sizes", type=int, nargs="+", default=[16, 32, 64])
+    ap.add_argument("--batch-sizes", type=int, nargs="+", default=[8, 16, 32, 64])
     ap.add_argument("--no-compile", dest="compile", action="store_false")
     ap.add_argument(
         "--cases", nargs="+", default=["400:1", "400:2", "2000:2"], help="folds: N:fold_processes pairs"
@@ -650,6 +660,11 @@ def main() -> None:
         rows, args = saved["rows"], argparse.Namespace(**{**vars(args), **saved["args"]})
     else:
         rows = run(args)
+        if args.what == "pareto" and store.exists():  # rows accumulate: a re-run model replaces its row
+            key = lambda r: (r["variant"], r["layers"], r["width"])  # noqa: E731
+            new = {key(r) for r in rows}
+            rows = [r for r in json.loads(store.read_text())["rows"] if key(r) not in new] + rows
+            args.models = [f"{r['variant']}:{r['layers']}x{r['width']}" for r in rows]
         store.write_text(
             json.dumps(
                 {

@@ -401,13 +401,23 @@ def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
     assert np.isfinite(masked.item()) and masked.item() < 1e3 and only_flowing.item() > 0
 
 
-def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files):
-    """Summed messages, per-area pooling, the edge readout and the graph input: a relabelling of the
-    particles and a reordering of the pairs change nothing."""
+@pytest.mark.parametrize("norm", ["batch", "layer"])
+def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files, norm):
+    """Summed messages, per-area pooling, the edge readout and the graph input, with either normalisation:
+    a relabelling of the particles and a reordering of the pairs change nothing."""
     torch.manual_seed(1)
     g = snapshot_graphs(tiny_files[2], SETTINGS, 0)[0]
     model = ResGCN(
-        2, 6, hidden=16, aggr="add", pool="area", dropout=0.0, global_in=1, head_layers=2, edge_readout=True
+        2,
+        6,
+        hidden=16,
+        aggr="add",
+        pool="area",
+        dropout=0.0,
+        global_in=1,
+        head_layers=2,
+        edge_readout=True,
+        norm=norm,
     ).eval()
     perm = torch.randperm(g.num_nodes)
     inv = torch.empty_like(perm)
@@ -418,6 +428,13 @@ def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files):
     out = model(g.x, g.edge_index, g.edge_attr, batch, u, area)
     out_perm = model(g.x[perm], inv[g.edge_index][:, order], g.edge_attr[order], batch, u, area)
     torch.testing.assert_close(out, out_perm, rtol=1e-5, atol=1e-5)
+
+
+def test_unknown_normalisation_is_refused_by_name():
+    from rheograph.errors import InputError
+
+    with pytest.raises(InputError, match=r"model.norm='group' is invalid: allowed \('batch', 'layer'\)"):
+        ResGCN(2, 6, norm="group")
 
 
 def test_descriptors_count_the_simulators_contacts_and_sum_the_features(tiny_files):

@@ -18,10 +18,12 @@ def _area_pool(x, batch, area):
 POOLS = {"mean": global_mean_pool, "add": global_add_pool, "max": global_max_pool, "area": _area_pool}
 BLOCKS = ("res", "res+", "dense", "plain")
 AGGRS = ("softmax", "mean", "add", "max", "powermean")
+NORMS = {"batch": nn.BatchNorm1d, "layer": nn.LayerNorm}  # per-feature over the batch | per node
 
 
 class ResGCN(nn.Module):
-    """Node/edge encoders -> ``num_layers`` DeepGCN layers (GENConv, batch norm, ReLU, dropout, residual)
+    """Node/edge encoders -> ``num_layers`` DeepGCN layers (GENConv, ``norm`` normalisation — batch, the
+    seed paper's, or layer, DeeperGCN's — ReLU, dropout, residual)
     -> graph pooling -> head (``head_layers`` linear layers) with ``out_channels`` outputs.
 
     Graph-level inputs u (G, global_in) — the imposed log stress, phi — are encoded and added to every node
@@ -51,6 +53,7 @@ class ResGCN(nn.Module):
         global_in: int = 0,
         head_layers: int = 1,
         edge_readout: bool = False,
+        norm: str = "batch",
     ):
         super().__init__()
         if block not in BLOCKS:
@@ -59,6 +62,8 @@ class ResGCN(nn.Module):
             raise InputError(f"model.pool={pool!r} is invalid: allowed {sorted(POOLS)}")
         if aggr not in AGGRS:
             raise InputError(f"model.aggr={aggr!r} is invalid: allowed {AGGRS}")
+        if norm not in NORMS:
+            raise InputError(f"model.norm={norm!r} is invalid: allowed {tuple(NORMS)}")
         if num_layers < 1 or hidden < 1 or head_layers < 1:
             raise InputError("model.num_layers, model.hidden and model.head_layers must be >= 1")
         self.block, self.pool_name, self.global_in = block, pool, global_in
@@ -80,13 +85,13 @@ class ResGCN(nn.Module):
                 t=1.0,
                 learn_t=aggr == "softmax",
                 num_layers=mlp_layers,
-                norm="batch",
+                norm=norm,
                 edge_dim=hidden,
             )
             self.layers.append(
                 DeepGCNLayer(
                     conv,
-                    nn.BatchNorm1d(hidden),
+                    NORMS[norm](hidden),
                     nn.ReLU(inplace=True),
                     block=block,
                     dropout=dropout,

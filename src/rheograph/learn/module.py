@@ -125,6 +125,7 @@ class SurrogateModule(L.LightningModule):
         global_in: int = 0,
         head_layers: int = 1,
         edge_readout: bool = False,
+        norm: str = "batch",
         lr: float = 5e-3,
         weight_decay: float = 0.0,
         loss_weights=(1.0, 1.0, 1.0),
@@ -157,6 +158,7 @@ class SurrogateModule(L.LightningModule):
             global_in=global_in,
             head_layers=head_layers,
             edge_readout=edge_readout,
+            norm=norm,
         )
         self.register_buffer("target_mean", torch.zeros(3))
         self.register_buffer("target_std", torch.ones(3))
