@@ -469,26 +469,28 @@ def main(argv=None) -> int:
     command = "python bench/vs_lfdem.py " + shlex.join(
         [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
     )
-    lines = [
-        "### Side by side with LF_DEM (issue #11)",
-        "",
-        f"Machine: {os.cpu_count()} cores; every run a child process pinned to core {args.core}, "
-        "single-threaded (OPENBLAS/OMP/NUMBA threads 1, OMP_THREAD_LIMIT=1); CPU = user + system time of "
-        f"the child.  φ = {args.phi:g}, σ/σ0 = {args.stress:g}, seed {args.seed}; both codes start from one "
-        "configuration (built by rheograph, written in LF_DEM's format).  Costs are differences between runs "
-        f"to strain {args.strains[0]:g} and {args.strains[1]:g} from the same start (start-up removed); "
-        f"codes alternate; medians of {args.repeats} repeat(s).  LF_DEM {version or '(version unknown)'}, "
-        "explicit Euler, `-s <σ>cl`; rheograph `simulate.py`, solver auto.",
-        "",
-        *table(rows, args.lfdem_disp),
-        "",
-        *[f"* {c}" for c in checks],
-        "",
-        f"Command (wall {time.time() - started:.0f} s): `{command}`",
-    ]
-    print("\n".join(lines), flush=True)
-    if not args.no_write:
-        write_section(ROOT / "docs" / "benchmarks.md", SECTION, "\n".join(lines))
+    for n in args.n:  # one section per system size, so that sizes can be measured in separate runs
+        lines = [
+            f"### Side by side with LF_DEM (issue #11), N = {n}",
+            "",
+            f"Machine: {os.cpu_count()} cores; every run a child process pinned to core {args.core}, "
+            "single-threaded (OPENBLAS/OMP/NUMBA threads 1, OMP_THREAD_LIMIT=1); CPU = user + system time "
+            f"of the child.  φ = {args.phi:g}, σ/σ0 = {args.stress:g}, seed {args.seed}; both codes start "
+            "from one configuration (built by rheograph, written in LF_DEM's format).  Costs are differences "
+            f"between runs to strain {args.strains[0]:g} and {args.strains[1]:g} from the same start "
+            f"(start-up removed); codes alternate; medians of {args.repeats} repeat(s).  LF_DEM "
+            f"{version or '(version unknown)'}, explicit Euler, `-s <σ>cl`; rheograph `simulate.py`, "
+            "solver auto.",
+            "",
+            *table([r for r in rows if r["n"] == n], args.lfdem_disp),
+            "",
+            *[f"* {c}" for c in checks if c.startswith(f"N = {n}:")],
+            "",
+            f"Command (wall {time.time() - started:.0f} s): `{command}`",
+        ]
+        print("\n".join(lines), flush=True)
+        if not args.no_write:
+            write_section(ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines))
     return 0
 
 

@@ -1,0 +1,150 @@
+"""Campaign cost: CPU seconds per unit strain of every committed run, per (N, φ, σ), and the CPU hours a
+full grid costs, so that the size of the dataset can be planned (issue #11).
+
+    python bench/campaign_cost.py [--index data/paper/index.json] \\
+        [--extra 'data/scheme_phi080/*/trajectory.h5']
+
+CPU seconds are what each run recorded (``summary/cpu_seconds``: process CPU time over all invocations,
+single-threaded), divided by the strain it reached.  Runs were made one per core on this 2-core machine,
+sometimes next to training, so they carry the machine's noise (≈ 1.5×).  ``--extra`` adds runs outside
+the dataset (the φ = 0.80 scheme study) in a second table, by scheme and disp_max.  Results replace the
+``campaign_cost`` section of docs/benchmarks.md unless ``--no-write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rheograph.collect import read_index
+from rheograph.dataset_card import run_cpu_seconds
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import write_section  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+STRESSES = (0.5, 1, 2, 3, 5, 10, 20, 50, 100, 200)
+SEEDS_PLANNED = {400: 3, 2000: 2}  # issue #13's grid
+STRAIN_PLANNED = 3.0  # per run: the dataset's experiment configs
+
+
+def seconds_per_strain(path: Path, strain: float) -> float:
+    return run_cpu_seconds(path) / strain if strain > 0 else float("nan")
+
+
+def dataset_rows(index_path: Path) -> list[dict]:
+    rows = []
+    for entry in read_index(index_path)["runs"]:
+        p = entry["params"]
+        if entry["status"] == "running":
+            continue
+        rows.append(
+            dict(
+                n=p["n_particles"],
+                phi=round(p["phi"], 4),
+                stress=p["stress"],
+                status=entry["status"],
+                cost=seconds_per_strain(Path(entry["path"]), entry["strain"]),
+            )
+        )
+    return rows
+
+
+def extra_rows(pattern: str) -> list[dict]:
+    rows = []
+    for name in sorted(glob.glob(pattern)):
+        try:
+            with h5py.File(name, "r") as h5:
+                p = json.loads(h5.attrs["params"])
+                status = str(h5.attrs["status"])
+                strain = float(h5["checkpoint"].attrs["strain"])
+        except OSError:  # being written by a running simulation
+            continue
+        scheme = p["integrator"] + ("-lagged" if p.get("lagged_step_control") else "")
+        rows.append(
+            dict(
+                n=p["n_particles"],
+                phi=round(p["phi"], 4),
+                stress=p["stress"],
+                seed=p["seed"],
+                scheme=scheme,
+                disp=p["disp_max"],
+                status=status,
+                strain=strain,
+                cost=seconds_per_strain(Path(name), strain),
+            )
+        )
+    return rows
+
+
+def render(rows: list[dict], extra: list[dict], command: str) -> str:
+    by_point = defaultdict(list)
+    for r in rows:
+        by_point[(r["n"], r["phi"], r["stress"])].append(r["cost"])
+    sizes = sorted({(n, phi) for n, phi, _ in by_point})
+    lines = [
+        "CPU seconds per unit strain (median over seeds) of the committed dataset runs (implicit, disp_max "
+        "2e-3), per σ/σ0; *grid* = CPU hours the full grid costs at that (N, φ): 10 stresses × the planned "
+        f"seeds (N = 400: {SEEDS_PLANNED[400]}, N = 2000: {SEEDS_PLANNED[2000]}) × {STRAIN_PLANNED:g} "
+        "strain, "
+        "from the medians (missing stresses: –, and the grid is a lower bound).",
+        "",
+        "| N | φ | " + " | ".join(f"{s:g}" for s in STRESSES) + " | grid CPU h |",
+        "|---|---|" + "---|" * len(STRESSES) + "---|",
+    ]
+    for n, phi in sizes:
+        medians = [
+            np.nanmedian(by_point[(n, phi, s)]) if (n, phi, s) in by_point else np.nan for s in STRESSES
+        ]
+        grid = np.nansum(medians) * SEEDS_PLANNED.get(n, 1) * STRAIN_PLANNED / 3600
+        partial = "≥ " if np.isnan(medians).any() else ""
+        cells = " | ".join("–" if np.isnan(m) else f"{m:.0f}" for m in medians)
+        lines.append(f"| {n} | {phi:.2f} | {cells} | {partial}{grid:.2f} |")
+    if extra:
+        lines += [
+            "",
+            "Runs outside the dataset (`--extra`), CPU seconds per unit strain reached:",
+            "",
+            "| N | φ | σ/σ0 | seed | scheme | disp_max | status | strain | CPU s/strain |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in sorted(
+            extra, key=lambda r: (r["n"], r["phi"], -r["stress"], r["seed"], r["scheme"], -r["disp"])
+        ):
+            lines.append(
+                f"| {r['n']} | {r['phi']:.2f} | {r['stress']:g} | {r['seed']} | {r['scheme']} | "
+                f"{r['disp']:g} | "
+                f"{r['status']} | {r['strain']:.2f} | {r['cost']:.0f} |"
+            )
+    lines += ["", f"Command: `{command}`"]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--index", default="data/paper/index.json")
+    ap.add_argument("--extra", default=None, help="glob of further trajectory files (e.g. a scheme study)")
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args()
+    rows = dataset_rows(ROOT / args.index)
+    extra = extra_rows(str(ROOT / args.extra)) if args.extra else []
+    command = (
+        "python bench/campaign_cost.py --index "
+        + args.index
+        + (f" --extra '{args.extra}'" if args.extra else "")
+    )
+    text = render(rows, extra, command)
+    print(text)
+    if not args.no_write:
+        write_section(ROOT / "docs" / "benchmarks.md", "campaign_cost", text)
+
+
+if __name__ == "__main__":
+    main()
