@@ -65,25 +65,11 @@ def config(args, n, epochs, batch_size, extra=(), split="grouped", fold_workers=
 
 
 def setup_fold(cfg, k=0):
-    """(datamodule, module) of fold ``k`` exactly as ``rheograph.learn.train.train_fold`` builds them."""
-    from hydra.utils import instantiate
-
+    """(datamodule, module) of fold ``k`` exactly as ``train.py`` builds them."""
     from rheograph.learn.train import graph_settings
+    from rheograph.learn.train import setup_fold as train_setup_fold
 
-    settings = graph_settings(cfg)
-    dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
-    dm.setup()
-    module = instantiate(
-        cfg.model,
-        edge_in=len(settings.edge_features),
-        global_in=len(settings.graph_inputs),
-        viscosity_scale=settings.viscosity_scale,
-        pressure_scale=settings.pressure_scale,
-        _convert_="all",
-    )
-    module.set_target_scaling(dm.target_mean, dm.target_std)
-    module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
-    return dm, module
+    return train_setup_fold(cfg, k, graph_settings(cfg))
 
 
 def held_out_scores(module, dm) -> dict:

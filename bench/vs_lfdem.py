@@ -14,7 +14,7 @@ LF_DEM is not part of this project: build it outside the repository (README.rst 
     sed 's/-lopenblas/-lblas/' config/Makefile_config_Ubuntu_OpenBLAS.mk > config/Makefile_config.mk
     make
 
-Method.  One initial configuration per N is built by rheograph (``random_configuration`` with the
+Method.  One initial configuration per N is built by rheograph (``initial_configuration`` from the
 SimParams seed, exactly what ``simulate.py`` builds) and written in LF_DEM's text configuration format
 (header ``# np1 np2 vf lx ly lz vf1 vf2 disp``, then ``x y z radius`` per particle; LF_DEM's plane is x-z,
 y = 0).  LF_DEM's parameter file is generated from the same SimParams (the reference file
@@ -257,24 +257,6 @@ def hydra_overrides(p, output_root: Path) -> list[str]:
     ]
 
 
-def initial_configuration(params):
-    """The configuration ``Simulation(params)`` starts from (the same call, the same seed)."""
-    from rheograph.sim.init_config import random_configuration
-
-    n_small, n_large = params.species_counts()
-    box = params.box_length()
-    pos, radii = random_configuration(
-        n_small,
-        n_large,
-        params.size_ratio,
-        box,
-        params.seed,
-        params.relax_tolerance,
-        params.initial_min_gap,
-    )
-    return pos, radii, box
-
-
 def check_same_start(n, conf_file, lf: dict, rg: dict, params) -> str:
     """Both codes read the same configuration: box, area fraction, positions and the first shear rate."""
     conf = read_lfdem_configuration(conf_file)
@@ -303,13 +285,14 @@ def check_same_start(n, conf_file, lf: dict, rg: dict, params) -> str:
 
 def measure(args, binary: Path, work: Path) -> tuple[list[dict], list[str], str]:
     from rheograph.sim import SimParams
+    from rheograph.sim.init_config import initial_configuration
     from rheograph.sim.params import scheme_settings
 
     g1, g2 = args.strains
     rows, checks, version = [], [], ""
     for n in args.n:
         base = SimParams(n_particles=n, phi=args.phi, stress=args.stress, seed=args.seed, strain=g2)
-        pos, radii, box = initial_configuration(base)
+        pos, radii, box = initial_configuration(base)  # what Simulation(base) starts from
         conf = work / f"conf_N{n}.dat"
         write_lfdem_configuration(conf, pos, radii, box, box)
         ours = []

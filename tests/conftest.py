@@ -33,3 +33,14 @@ def tiny_files(tmp_path_factory):
         run_state_point(params, path, progress=False)
         files.append(str(path))
     return files
+
+
+def load_bench_script(name: str):
+    """A script of bench/ (not a package) imported as a module: ``load_bench_script("vs_lfdem")``."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

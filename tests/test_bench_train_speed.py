@@ -1,21 +1,15 @@
 """bench/train_speed.py's bookkeeping: the Pareto front against brute force, and time to accuracy."""
 
-import importlib.util
 import itertools
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "train_speed.py"
+from conftest import load_bench_script
 
 
 @pytest.fixture(scope="module")
 def train_speed():
-    spec = importlib.util.spec_from_file_location("train_speed", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_bench_script("train_speed")
 
 
 def test_pareto_front_matches_brute_force(train_speed):

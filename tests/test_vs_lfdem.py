@@ -1,7 +1,6 @@
 """bench/vs_lfdem.py without LF_DEM: the no-binary path, the configuration and parameter files it writes for
 LF_DEM, and where its results go in docs/benchmarks.md."""
 
-import importlib.util
 import os
 import re
 import subprocess
@@ -10,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_bench_script
 
+from rheograph.sim.init_config import initial_configuration
 from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,10 +21,7 @@ REFERENCE_PARAMS = ROOT.parent / "shared" / "reference" / "lfdem_phi0.76" / "par
 
 @pytest.fixture(scope="module")
 def vs_lfdem():
-    spec = importlib.util.spec_from_file_location("vs_lfdem", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_bench_script("vs_lfdem")
 
 
 def run_script(*args):
@@ -77,7 +75,7 @@ def test_configuration_of_simparams_is_what_the_simulation_starts_from(vs_lfdem)
     from rheograph.sim import Simulation
 
     params = SimParams(n_particles=64, phi=0.72, seed=5)
-    pos, radii, box = vs_lfdem.initial_configuration(params)
+    pos, radii, box = initial_configuration(params)
     state = Simulation(params).state
     assert np.array_equal(pos, state.positions) and np.array_equal(radii, state.radii)
     assert box == state.lx == state.ly

@@ -89,14 +89,11 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
     )
 
 
-def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) -> tuple[dict, dict]:
-    """Train, test and save fold ``k``; returns (result row, test predictions with baselines)."""
-    import lightning as L
-
-    L.seed_everything(int(cfg.seed) + k, workers=True)
+def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
+    """(datamodule, module) of fold ``k``: split made, target and edge-feature scaling fitted on its
+    training part and set in the (untrained) module."""
     dm = instantiate(cfg.data, graph=settings, fold=k, _convert_="all")
     dm.setup()
-    dm.save_split(run_dir / f"fold{k}_split.json")
     module = instantiate(
         cfg.model,
         edge_in=len(settings.edge_features),
@@ -107,6 +104,16 @@ def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) 
     )
     module.set_target_scaling(dm.target_mean, dm.target_std)
     module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
+    return dm, module
+
+
+def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) -> tuple[dict, dict]:
+    """Train, test and save fold ``k``; returns (result row, test predictions with baselines)."""
+    import lightning as L
+
+    L.seed_everything(int(cfg.seed) + k, workers=True)
+    dm, module = setup_fold(cfg, k, settings)
+    dm.save_split(run_dir / f"fold{k}_split.json")
     callbacks = [instantiate(c) for c in cfg.callbacks.values()]
     logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
     trainer = instantiate(

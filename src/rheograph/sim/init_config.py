@@ -80,3 +80,20 @@ def random_configuration(
         f"could not relax the initial configuration: max overlap {max_overlap:.2e} > {tolerance:.1e} "
         f"after {max_iterations} iterations (area fraction too close to jamming?)"
     )
+
+
+def initial_configuration(params) -> tuple[np.ndarray, np.ndarray, float]:
+    """The start of a state point: (positions (N, 2), radii (N,), box length) for a ``SimParams``, from its
+    seed — what ``Simulation(params)`` starts from, and what the LF_DEM comparison writes for LF_DEM."""
+    n_small, n_large = params.species_counts()
+    box = params.box_length()
+    pos, radii = random_configuration(
+        n_small,
+        n_large,
+        params.size_ratio,
+        box,
+        params.seed,
+        params.relax_tolerance,
+        params.initial_min_gap,
+    )
+    return pos, radii, box

@@ -25,7 +25,7 @@ from numba import njit
 from rheograph.sim import contacts
 from rheograph.sim.assembly import assemble_resistance, build_pattern
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry, wrap_offset, wrap_positions
-from rheograph.sim.init_config import random_configuration
+from rheograph.sim.init_config import initial_configuration
 from rheograph.sim.lubrication import lubrication_resistance
 from rheograph.sim.params import SimParams
 from rheograph.sim.solver import make_solver
@@ -148,17 +148,7 @@ class Simulation:
     def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "auto"):
         self.params = params
         if state is None:
-            n_small, n_large = params.species_counts()
-            box = params.box_length()
-            pos, radii = random_configuration(
-                n_small,
-                n_large,
-                params.size_ratio,
-                box,
-                params.seed,
-                params.relax_tolerance,
-                params.initial_min_gap,
-            )
+            pos, radii, box = initial_configuration(params)
             state = SimState(positions=pos, radii=radii, lx=box, ly=box)
         self.state = state
         self.solver = make_solver(solver)
