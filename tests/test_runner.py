@@ -94,6 +94,18 @@ def test_extending_the_strain_continues_a_completed_run(tmp_path):
     assert read_timeseries(path)["strain"].shape[0] == 20
 
 
+def test_rerunning_a_finished_state_point_leaves_its_file_untouched(tmp_path):
+    """A sweep invoked again skips finished runs without opening them for writing (no rewritten
+    attributes, no HDF5 free-space growth, no churn in committed data)."""
+    path = tmp_path / "run.h5"
+    first = run_state_point(SimParams(**TINY), path, progress=False)
+    before = path.read_bytes()
+    again = run_state_point(SimParams(**TINY), path, progress=False)
+    assert path.read_bytes() == before
+    assert (again.status, again.strain, again.steps) == (first.status, first.strain, first.steps)
+    assert again.summary["viscosity"] == pytest.approx(first.summary["viscosity"])
+
+
 def test_files_written_before_a_parameter_existed_resume_with_its_default(tmp_path):
     """A parameter added later (here lagged_step_control) is absent from older files' params and
     checkpoint; such a file resumes as if it held the default, and continues bit-for-bit."""

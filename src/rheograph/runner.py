@@ -11,6 +11,7 @@ when the flow took longer than 0.1 strain would take at the jam viscosity and di
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import time as wallclock
@@ -22,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
-from rheograph.io.hdf5 import TrajectoryFile, is_compressed, rewrite
+from rheograph.io.hdf5 import RESUMABLE_PARAMS, TrajectoryFile, is_compressed, rewrite
 from rheograph.sim.integrator import Simulation, particle_pressure, viscosity
 from rheograph.sim.params import SimParams
 
@@ -91,6 +92,27 @@ def compress_at_rest(path: Path) -> None:
         rewrite(path, compressed=True)
 
 
+def finished_outcome(path: Path, params: SimParams) -> RunOutcome | None:
+    """The outcome of a run of these parameters that already reached ``params.strain`` (or jammed), read
+    without opening the file for writing — rerunning a sweep leaves finished files byte for byte as they
+    were; None when the run has to continue (or the file needs ``open_existing``'s checks and messages)."""
+    try:
+        with h5py.File(path, "r") as h5:
+            status = str(h5.attrs["status"])
+            stored = json.loads(h5.attrs["params"])
+            strain = float(h5["checkpoint"].attrs["strain"])
+            steps = int(h5["checkpoint"].attrs["steps"])
+            summary = dict(h5["summary"].attrs) if "summary" in h5 else {}
+    except (OSError, KeyError):
+        return None
+    defaults, mine = SimParams.defaults(), params.to_dict()
+    if any(k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k] for k in mine):
+        return None
+    if status == "jammed" or (status == "completed" and strain >= params.strain):
+        return RunOutcome(status, strain, steps, 0.0, summary)
+    return None
+
+
 def run_state_point(
     params: SimParams,
     path: str | Path,
@@ -104,6 +126,10 @@ def run_state_point(
     to emulate an interruption at a deterministic point).
     """
     path = Path(path)
+    if path.exists():
+        finished = finished_outcome(path, params)
+        if finished is not None:
+            return finished
     traj = TrajectoryFile(path, params)
     if path.exists():
         state, counters = traj.open_existing()
