@@ -25,11 +25,9 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-import h5py  # noqa: E402
 import numpy as np  # noqa: E402
 
-from rheograph.analysis import decorrelation_strain  # noqa: E402
-from rheograph.dataset_card import run_cpu_seconds  # noqa: E402
+from rheograph.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
 from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
 from rheograph.learn.predict import predict_file  # noqa: E402
 
@@ -73,14 +71,7 @@ def main(argv=None) -> None:
         preds.append(np.stack([result[f"{t}_pred"][steady] for t in TARGET_NAMES], axis=1))
         stds.append(np.stack([result[f"{t}_pred_std"][steady] for t in TARGET_NAMES], axis=1))
         trues.append(np.stack([result[f"{t}_sim"][steady] for t in TARGET_NAMES], axis=1))
-        cpu = run_cpu_seconds(path)
-        with h5py.File(path, "r") as h5:
-            strain = float(h5.attrs["param_strain"])
-            ts = h5["timeseries"]
-            steady = ts["strain"][()] >= 1.0
-            interval = float(h5.attrs["param_output_interval"])
-            tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
-        sim_cost.append(cpu / strain * max(tau, interval))
+        sim_cost.append(cpu_seconds_per_decorrelated_snapshot(path))
     pred, std, true = np.concatenate(preds), np.concatenate(stds), np.concatenate(trues)
     per_snapshot = seconds / n_snapshots
     finite = [c for c in sim_cost if np.isfinite(c)]

@@ -450,29 +450,13 @@ def render_pareto(rows, args) -> str:
 
 
 # ---- speed-up over the simulator ------------------------------------------------------------------------
-def simulator_seconds_per_snapshot(path) -> float:
-    """CPU seconds the simulator spent per decorrelated snapshot of one run: its recorded CPU s/strain x
-    the 1/e decorrelation strain of log eta_r over the steady window (at least one output interval)."""
-    import h5py
-
-    from rheograph.analysis import decorrelation_strain
-    from rheograph.dataset_card import run_cpu_seconds
-
-    with h5py.File(path, "r") as h5:
-        strain = float(h5["checkpoint"].attrs["strain"])
-        ts = h5["timeseries"]
-        steady = ts["strain"][()] >= 1.0
-        interval = float(h5.attrs["param_output_interval"])
-        tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
-    return run_cpu_seconds(path) / strain * max(tau, interval)
-
-
 def inference(args) -> list[dict]:
     """Per N: ms per snapshot to predict every snapshot of a trajectory file in one batched pass (read +
     graph building + forward; one model and the 5-fold ensemble), against the simulator's CPU seconds per
     decorrelated snapshot (median over every run of that phi and N)."""
     from torch_geometric.loader import DataLoader
 
+    from rheograph.dataset_card import cpu_seconds_per_decorrelated_snapshot
     from rheograph.graphs.dataset import snapshot_graphs
 
     torch.set_num_threads(1)
@@ -483,7 +467,7 @@ def inference(args) -> list[dict]:
         files = sorted({dm.files[int(dm.dataset.run_id[int(i)])] for i in dm.test_idx})[: args.files_per_n]
         snapshot_graphs(files[0], dm.graph, 0)  # numba compilation outside the timed region
         # the simulator's cost over every run of this (phi, N), all stresses: the test files are a subset
-        sim = [simulator_seconds_per_snapshot(path) for path in dm.files]
+        sim = [cpu_seconds_per_decorrelated_snapshot(path) for path in dm.files]
         builds, forwards = [], []
         for _ in range(args.repeats):  # medians over passes: timings on this shared machine are noisy
             build, forward, count = 0.0, 0.0, 0
@@ -545,7 +529,10 @@ def folds(args) -> list[dict]:
 
     rows = []
     for case in args.cases:
-        n, workers = (int(v) for v in case.split(":"))
+        try:
+            n, workers = (int(v) for v in case.split(":"))
+        except ValueError:
+            raise SystemExit(f"--cases: expected N:processes (e.g. 400:2), got {case!r}") from None
         extra = ["threads=2"] if workers == 1 else []
         cfg = config(args, n, args.epochs, None, extra, fold_workers=workers)
         run_dir = RESULTS / f"folds_n{n}_w{workers}"

@@ -40,6 +40,18 @@ def run_cpu_seconds(path: str | Path) -> float:
     return sum(float(m) for m in re.findall(r"steps, ([\d.]+) s\)", log.read_text()))
 
 
+def cpu_seconds_per_decorrelated_snapshot(path: str | Path) -> float:
+    """What one independent snapshot of a run cost the simulator: its CPU seconds per unit strain reached
+    x the 1/e decorrelation strain of log eta_r over the steady window (at least one output interval)."""
+    with h5py.File(path, "r") as h5:
+        strain = float(h5["checkpoint"].attrs["strain"])
+        ts = h5["timeseries"]
+        steady = ts["strain"][()] >= float(h5.attrs["param_steady_state_strain"])
+        interval = float(h5.attrs["param_output_interval"])
+        tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
+    return run_cpu_seconds(path) / strain * max(tau, interval)
+
+
 def run_records(index: dict, min_strain: float) -> list[dict]:
     """Per run: parameters, status, snapshot targets after ``min_strain``, decorrelation and transient
     strains of the instantaneous eta_r (log), Pi and Z_mu, CPU seconds and file size."""
