@@ -270,6 +270,23 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             ]
         )
         np.testing.assert_allclose(a, b, rtol=1e-5)
+    # a random split has no cross-validated error bars (its test snapshots share trajectories with
+    # training); a held-out run's error_model.json next to the bundles gives each snapshot its bar
+    from rheograph.learn.error_model import fit_error_model, predicted_error, write_error_model
+
+    assert not (run_dir / "error_model.json").exists() and "eta_pred_err" not in result
+    write_error_model(
+        run_dir, fit_error_model(saved["pred"], saved["true"], saved["stress"], saved["phi"], min_count=1)
+    )
+    with_bars = predict_file([run_dir / "fold0.pt"], tiny_files[2])
+    expected = predicted_error(
+        fit_error_model(saved["pred"], saved["true"], saved["stress"], saved["phi"], min_count=1),
+        with_bars["stress"],
+        with_bars["phi"],
+    )
+    for k, name in enumerate(("eta", "pressure", "z_mu")):
+        np.testing.assert_allclose(with_bars[f"{name}_pred_err"], expected[:, k])
+        assert np.all(with_bars[f"{name}_pred_err"] > 0)
     # a state point of the training range is in the domain; phi = 0.76 at sigma = 400 is not, and says so
     assert result["in_domain"].mean() > 0.5
     from rheograph.runner import run_state_point

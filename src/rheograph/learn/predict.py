@@ -7,6 +7,12 @@ Model bundles (``fold*.pt``) are loaded with ``torch.load(weights_only=True)``: 
 Each bundle records the domain it was trained on; every prediction carries ``in_domain`` (the state point
 lies in the trained phi, sigma and N ranges, and the snapshot's edge features in the trained ranges),
 and a warning names what lies outside.  Inputs the model cannot read (another size ratio) are refused.
+
+Columns per target: ``*_pred`` (ensemble mean), ``*_pred_std`` (spread over the fold models: flags
+disagreement, too narrow to be an error bar), ``*_pred_err`` (the cross-validated error bar of the
+training run's ``error_model.json``, rheograph.learn.error_model: one RMS of held-out residuals, in log10
+units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time — and absolute for
+Z_μ; absent for runs without an error model) and ``*_sim`` (the simulator's value).
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
+from rheograph.learn.error_model import predicted_error, read_error_model
 from rheograph.learn.module import TARGET_NAMES, SurrogateModule
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 
@@ -118,9 +125,13 @@ def predict_file(model_paths, trajectory: str | Path) -> dict:
         "phi": meta["phi"],
         "in_domain": in_domain.astype(np.int64),
     }
+    error_model = read_error_model(Path(sorted(model_paths)[0]).parent)
+    errors = predicted_error(error_model, meta["stress"], meta["phi"]) if error_model else None
     for k, name in enumerate(TARGET_NAMES):
         out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
         out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
+        if errors is not None:
+            out[f"{name}_pred_err"] = errors[:, k]
         out[f"{name}_sim"] = true[:, k]
     return out
 

@@ -15,6 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
+from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
 
 log = logging.getLogger("rheograph.train")
@@ -219,7 +220,13 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
                 import optuna
 
                 raise optuna.TrialPruned(f"pruned after fold {k}")
-    np.savez(run_dir / "test_predictions.npz", **_stack_predictions(predictions))
+    stacked = _stack_predictions(predictions)
+    np.savez(run_dir / "test_predictions.npz", **stacked)
+    if cfg.data.split != "random":  # held-out trajectories (or phi): residuals of unseen data only
+        model = fit_error_model(
+            stacked["pred"], stacked["true"], stacked["stress"], stacked["phi"], stacked["jammed"]
+        )
+        write_error_model(run_dir, model)
     summary = {
         key: float(np.mean([r[key] for r in fold_results])) for key in fold_results[0] if key != "fold"
     }
