@@ -133,7 +133,7 @@ def test_resume_refuses_another_state_point(tmp_path):
 def test_finished_runs_are_compressed_at_rest_and_extend_like_raw_ones(tmp_path):
     """A finished file is compressed (lossless, checkpoint kept); extending it (raw while running, then
     compressed again) gives the trajectory of a run that was never compressed."""
-    from rheograph.io.hdf5 import is_compressed, rewrite
+    from rheograph.io.hdf5 import is_compact, rewrite
 
     ref, packed = tmp_path / "ref.h5", tmp_path / "packed.h5"
     longer = SimParams(**{**TINY, "strain": 0.2})
@@ -141,15 +141,58 @@ def test_finished_runs_are_compressed_at_rest_and_extend_like_raw_ones(tmp_path)
     rewrite(ref, compressed=False)
     run_state_point(SimParams(**TINY), packed, progress=False)
     with h5py.File(packed) as h5:
-        assert is_compressed(h5)
+        assert is_compact(h5)
     run_state_point(SimParams(**TINY), packed, progress=False)  # finished: not decompressed
     with h5py.File(packed) as h5:
-        assert is_compressed(h5)
+        assert is_compact(h5)
     run_state_point(longer, ref, progress=False)
     run_state_point(longer, packed, progress=False)
     a, b = read_timeseries(ref), read_timeseries(packed)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_the_compact_layout_keeps_what_the_learning_and_a_resume_need(tmp_path):
+    """At rest, positions are stored to 1e-7 a, stretches as float32 and pairs as int32
+    (rheograph.io.hdf5.AT_REST): against the raw file of the same run, positions move by <= 5e-8 a, the
+    graphs keep every edge and contact flag with features equal to float32 round-off, targets, time series
+    and the checkpoint are bit for bit the same, and the file is smaller."""
+    import shutil
+
+    from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
+    from rheograph.io.hdf5 import is_compact, rewrite
+
+    raw, compact = tmp_path / "raw.h5", tmp_path / "compact.h5"
+    params = SimParams(**{**TINY, "stress": 50.0})  # many contacts: overlaps of ~1e-3 a decide the flags
+    run_state_point(params, raw, progress=False, max_steps=250)  # unfinished: raw, full precision
+    shutil.copy(raw, compact)
+    rewrite(compact, compressed=True)
+    with h5py.File(raw) as a, h5py.File(compact) as b:
+        assert not is_compact(a) and is_compact(b)
+        assert b["snapshots/positions"].shape[0] >= 2 and b["snapshots/contact_pairs"].shape[0] > 0
+        drift = np.abs(a["snapshots/positions"][()] - b["snapshots/positions"][()]).max()
+        assert 0 < drift <= 0.5e-7 * (1 + 1e-6)
+        np.testing.assert_array_equal(a["snapshots/contact_pairs"][()], b["snapshots/contact_pairs"][()])
+        np.testing.assert_allclose(
+            a["snapshots/contact_stretch"][()], b["snapshots/contact_stretch"][()], rtol=1e-7, atol=1e-30
+        )
+        for group in ("checkpoint", "timeseries"):
+            for name in a[group]:
+                np.testing.assert_array_equal(a[group][name][()], b[group][name][()], err_msg=name)
+        for name in ("viscosity", "pressure", "z_mu", "z", "strain", "le_offset"):
+            np.testing.assert_array_equal(a["snapshots"][name][()], b["snapshots"][name][()], err_msg=name)
+    settings = GraphSettings(
+        edge_features=("gap", "dx", "dy", "contact", "overlap", "lubrication", "load", "frictional"),
+        graph_inputs=("log_stress",),
+        min_strain=0.0,
+    )
+    for g_raw, g_compact in zip(snapshot_graphs(raw, settings, 0), snapshot_graphs(compact, settings, 0)):
+        np.testing.assert_array_equal(g_raw.edge_index.numpy(), g_compact.edge_index.numpy())
+        contact = list(settings.edge_features).index("contact")
+        np.testing.assert_array_equal(g_raw.edge_attr[:, contact], g_compact.edge_attr[:, contact])
+        np.testing.assert_allclose(g_raw.edge_attr.numpy(), g_compact.edge_attr.numpy(), rtol=2e-3, atol=1e-5)
+        np.testing.assert_array_equal(g_raw.y_raw.numpy(), g_compact.y_raw.numpy())
+    assert compact.stat().st_size < raw.stat().st_size
 
 
 def test_a_state_point_already_running_elsewhere_is_refused(tmp_path):

@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.hdf5 import PRODUCER, is_compressed, read_run_info, rewrite
+from rheograph.io.hdf5 import PRODUCER, is_compact, read_run_info, rewrite
 
 USABLE = ("completed", "jammed")
 
@@ -89,7 +89,8 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--compress",
         action="store_true",
-        help="rewrite finished runs losslessly compressed (files finished before runs compressed themselves)",
+        help="rewrite finished runs into the compact at-rest layout (rheograph.io.hdf5.AT_REST) that "
+        "files finished by older versions lack",
     )
     args = ap.parse_args(argv)
     missing = [d for d in args.directories if not Path(d).is_dir()]
@@ -100,12 +101,16 @@ def main(argv=None) -> None:
         saved = 0
         for entry in index["runs"]:
             if entry["status"] in USABLE:
-                with h5py.File(entry["path"], "r") as h5:
-                    if is_compressed(h5):
-                        continue
-                before, after = rewrite(entry["path"], compressed=True)
+                try:
+                    with h5py.File(entry["path"], "r") as h5:
+                        if is_compact(h5):
+                            continue
+                    before, after = rewrite(entry["path"], compressed=True)
+                except OSError as exc:  # being written by a running simulation (HDF5 file lock)
+                    print(f"  not compacted {entry['path']}: {exc}")
+                    continue
                 saved += before - after
-        print(f"compressed: {saved / 1e6:.1f} MB saved")
+        print(f"compacted: {saved / 1e6:.1f} MB saved")
     write_index(index, args.out)
     usable = sum(e["status"] in USABLE for e in index["runs"])
     print(f"{len(index['runs'])} runs ({usable} usable), {len(index['skipped'])} skipped -> {args.out}")

@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
-from rheograph.io.hdf5 import RESUMABLE_PARAMS, TrajectoryFile, is_compressed, rewrite
+from rheograph.io.hdf5 import RESUMABLE_PARAMS, TrajectoryFile, is_compact, rewrite
 from rheograph.sim.integrator import Simulation, particle_pressure, viscosity
 from rheograph.sim.params import SimParams
 
@@ -87,7 +87,7 @@ def compress_at_rest(path: Path) -> None:
     rest); a file already compressed is left as it is, so rerunning a finished state point changes
     nothing."""
     with h5py.File(path, "r") as h5:
-        done = is_compressed(h5)
+        done = is_compact(h5)
     if not done:
         rewrite(path, compressed=True)
 

@@ -48,12 +48,30 @@ SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "p
 RESUMABLE_PARAMS = {"strain", "max_wall_seconds", "checkpoint_wall_seconds", "jam_intervals"}
 
 
-# Compressed at rest, raw while running.  gzip + byte shuffle (lossless) halves a finished file; positions
-# keep float64, since overlaps of ~1e-3 a at coordinates of ~30 a need ~1e-7 relative precision to decide
-# contacts and their CLM state.  A file being appended to stays uncompressed: a SIGKILL between flushes
-# can leave a compressed chunk half written, which then fails to decode when the run resumes (the SIGKILL
-# test found it), while a raw chunk keeps its checkpointed rows intact.
+# Raw while running, compact at rest.  A file being appended to stays uncompressed: a SIGKILL between
+# flushes can leave a compressed chunk half written, which then fails to decode when the run resumes (the
+# SIGKILL test found it), while a raw chunk keeps its checkpointed rows intact.  A finished file is
+# rewritten with gzip + byte shuffle and, for the three datasets that make up most of it, storage sized
+# to the physics (AT_REST, docs/dataset.md "Storage"):
+# * snapshot positions quantised to 1e-7 a (HDF5 scale-offset, 7 decimals; error <= 5e-8 a): contacts
+#   are decided by overlaps of ~1e-4-1e-3 a, so a stored gap moves by <= 1e-7 a, 1e-4-1e-3 of an overlap;
+#   float32 would give 3e-6 a at coordinates of ~50 a (N = 2000), a few % of a small overlap;
+# * tangential spring stretches as float32 (relative 6e-8; they are ~1e-5-1e-3 a);
+# * contact pair indices as int32.
+# Halves a file again after gzip (2.3 -> 1.1 MB at N = 2000).  The checkpoint stays exact (float64,
+# lossless): it is what a run resumes or is extended from; time series and targets are lossless.
 COMPRESSION = dict(compression="gzip", compression_opts=4, shuffle=True)
+WRITER_DTYPES = {  # what a running file holds
+    "snapshots/positions": np.float64,
+    "snapshots/contact_stretch": np.float64,
+    "snapshots/contact_pairs": np.int64,
+}
+POSITION_DECIMALS = 7
+AT_REST = {
+    "snapshots/positions": dict(dtype=np.float64, scaleoffset=POSITION_DECIMALS),
+    "snapshots/contact_stretch": dict(dtype=np.float32),
+    "snapshots/contact_pairs": dict(dtype=np.int32),
+}
 
 
 class TrajectoryFileError(InputError):
@@ -103,7 +121,7 @@ class TrajectoryFile:
                 "positions",
                 shape=(0, n, 2),
                 maxshape=(None, n, 2),
-                dtype=np.float64,
+                dtype=WRITER_DTYPES["snapshots/positions"],
                 chunks=(1, n, 2),
             )
             sn.create_dataset(
@@ -116,7 +134,7 @@ class TrajectoryFile:
                 "contact_pairs",
                 shape=(0, 2),
                 maxshape=(None, 2),
-                dtype=np.int64,
+                dtype=WRITER_DTYPES["snapshots/contact_pairs"],
                 chunks=(1024, 2),
             )
             sn.create_dataset("contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,))
@@ -124,7 +142,7 @@ class TrajectoryFile:
                 "contact_stretch",
                 shape=(0, 2),
                 maxshape=(None, 2),
-                dtype=np.float64,
+                dtype=WRITER_DTYPES["snapshots/contact_stretch"],
                 chunks=(1024, 2),
             )
         self.h5 = h5py.File(tmp, "r+")
@@ -157,7 +175,7 @@ class TrajectoryFile:
             h5.close()
             raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
         will_step = "checkpoint" in h5 and float(h5["checkpoint"].attrs["strain"]) < self.params.strain
-        if will_step and is_compressed(h5):  # a finished file, compressed at rest, is extended:
+        if will_step and h5["snapshots/positions"].compression is not None:  # a finished file is extended:
             h5.close()  # raw again before appending (see COMPRESSION)
             rewrite(self.path, compressed=False)
             h5 = h5py.File(self.path, "r+")
@@ -284,14 +302,17 @@ def read_run_info(path: str | Path) -> dict:
         }
 
 
-def is_compressed(h5: h5py.File) -> bool:
-    return h5["snapshots/positions"].compression is not None
+def is_compact(h5: h5py.File) -> bool:
+    """Whether a file has the at-rest layout (AT_REST); raw running files and files compacted before
+    AT_REST existed (gzip only) have not."""
+    return h5["snapshots/positions"].scaleoffset is not None
 
 
 def rewrite(path: str | Path, compressed: bool = True) -> tuple[int, int]:
-    """Rewrite a trajectory file not being written, its chunked datasets with ``COMPRESSION`` (or raw:
-    ``compressed=False``, before a finished run is extended).  Lossless; chunking, attributes and the
-    checkpoint kept.  Written to a temporary file and swapped in atomically.  Returns (bytes before,
+    """Rewrite a trajectory file not being written: compact at rest (``compressed=True``: COMPRESSION on
+    every chunked dataset, AT_REST storage for positions, stretches and pairs) or raw with the writer's
+    dtypes (``compressed=False``, before a finished run is extended).  Attributes, chunking and the exact
+    checkpoint are kept.  Written to a temporary file and swapped in atomically.  Returns (bytes before,
     bytes after)."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
@@ -304,10 +325,12 @@ def rewrite(path: str | Path, compressed: bool = True) -> tuple[int, int]:
             if isinstance(obj, h5py.Group):
                 dst.require_group(name).attrs.update(dict(obj.attrs))
                 return
-            options = COMPRESSION if (obj.chunks and compressed) else {}
-            out = dst.create_dataset(
-                name, data=obj[()], maxshape=obj.maxshape, chunks=obj.chunks, dtype=obj.dtype, **options
-            )
+            options = {"dtype": obj.dtype}
+            if name in AT_REST:
+                options["dtype"] = WRITER_DTYPES[name]
+            if obj.chunks and compressed:
+                options.update(COMPRESSION, **AT_REST.get(name, {}))
+            out = dst.create_dataset(name, data=obj[()], maxshape=obj.maxshape, chunks=obj.chunks, **options)
             out.attrs.update(dict(obj.attrs))
 
         src.visititems(copy)
