@@ -304,7 +304,23 @@ def test_jam_detection_ends_a_stalled_run(tmp_path):
     ts = read_timeseries(tmp_path / "jam.h5")
     assert out.status == "jammed", (out, ts["viscosity"][-10:])
     assert ts["jammed"][-5:].all()
-    assert read_run_info(tmp_path / "jam.h5")["status"] == "jammed"
+    info = read_run_info(tmp_path / "jam.h5")
+    assert info["status"] == "jammed"
+    # the last snapshot is the arrested packing, at the strain where the run stopped; the snapshots from
+    # the stalled window on are labelled jammed, earlier ones flowed; the learning keeps the jammed ones
+    # at any strain (an arrested packing is no start-up transient) and marks exactly those
+    from rheograph.analysis import jammed_snapshots
+    from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
+
+    with h5py.File(tmp_path / "jam.h5") as h5:
+        snap_strain, z_mu = h5["snapshots/strain"][()], h5["snapshots/z_mu"][()]
+    assert snap_strain[-1] == pytest.approx(info["strain"], abs=1e-3)
+    jammed = jammed_snapshots("jammed", snap_strain, ts["strain"], params.jam_intervals)
+    assert jammed[-1] and not jammed[0] and z_mu[-1] > 0
+    assert not jammed_snapshots("completed", snap_strain, ts["strain"], params.jam_intervals).any()
+    graphs = snapshot_graphs(tmp_path / "jam.h5", GraphSettings(min_strain=10.0), run_id=0)
+    assert len(graphs) == jammed.sum() and all(bool(g.jammed) for g in graphs)
+    assert graphs[-1].strain.item() == pytest.approx(snap_strain[-1])
 
 
 def test_flowing_state_is_not_flagged_jammed(tmp_path):

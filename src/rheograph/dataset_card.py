@@ -18,10 +18,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rheograph.analysis import decorrelation_strain, transient_strain
+from rheograph.analysis import decorrelation_strain, jammed_snapshots, transient_strain
 from rheograph.collect import build_index, write_index
 from rheograph.errors import InputError, one_line_errors
 from rheograph.flowcurve import collect
+from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
 
@@ -68,8 +69,12 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 "z_mu": ts["z_mu"][()],
             }
             snap_strain = sn["strain"][()]
-            keep = snap_strain >= min_strain
-            snaps = {k: sn[k][()][keep] for k in (*TARGETS, "shear_rate")}
+            jammed = jammed_snapshots(
+                entry["status"], snap_strain, strain, p.get("jam_intervals", SimParams.jam_intervals)
+            )
+            # as the learning reads them: flowing after the transient, arrested packings at any strain
+            flowing_snaps = (snap_strain >= min_strain) & ~jammed
+            snaps = {k: sn[k][()][flowing_snaps] for k in (*TARGETS, "shear_rate")}
         cpu = run_cpu_seconds(path)
         steady = strain >= p["steady_state_strain"]
         flowing = entry["status"] != "jammed"
@@ -83,7 +88,9 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 status=entry["status"],
                 strain=entry["strain"],
                 snapshots=snaps,
-                n_snapshots=int(keep.sum()),
+                n_snapshots=int(flowing_snaps.sum() + jammed.sum()),
+                n_flowing_snapshots=int(flowing_snaps.sum()),
+                n_jammed_snapshots=int(jammed.sum()),
                 snapshot_interval=p["snapshot_interval"],
                 flowing=flowing,
                 decorrelation={
@@ -118,9 +125,11 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         command,
         "```",
         "",
-        f"Snapshots count from strain {min_strain:g} on (start-up transient skipped).  Shear-jammed runs "
-        "(status `jammed`) keep their snapshots, labelled jammed: their Π and Z_μ (the static packing "
-        "under load) are valid targets, their η_r is not.",
+        f"Flowing snapshots count from strain {min_strain:g} on (start-up transient skipped).  A run whose "
+        "flow stops ends with status `jammed` and one last snapshot of the arrested packing; its snapshots "
+        "from the start of the stalled window on are labelled jammed (kept at any strain: an arrested "
+        "packing is not a transient): their Π and Z_μ (the static packing under load) are valid targets, "
+        "their η_r is not.  Its earlier snapshots flowed and count as flowing.",
         "",
         "## Runs and snapshots per (N, φ)",
         "",
@@ -134,8 +143,8 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
             f"| {n} | {phi:.2f} | {len(runs)} | {len({r['seed'] for r in runs})} "
             f"| {status.count('completed')} | {status.count('jammed')} "
             f"| {len(status) - status.count('completed') - status.count('jammed')} "
-            f"| {sum(r['n_snapshots'] for r in runs if r['flowing'])} "
-            f"| {sum(r['n_snapshots'] for r in runs if not r['flowing'])} "
+            f"| {sum(r['n_flowing_snapshots'] for r in runs)} "
+            f"| {sum(r['n_jammed_snapshots'] for r in runs)} "
             f"| {np.nansum([r['cpu_seconds'] for r in runs]) / 3600:.2f} "
             f"| {sum(r['bytes'] for r in runs) / 1e6:.1f} |"
         )
@@ -263,10 +272,10 @@ def plot_fig2(records: list[dict], path: Path) -> None:
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(phis)))
     fig, axes = plt.subplots(1, 4, figsize=(17, 4.2))
     for phi, colour in zip(phis, colours):
-        runs = [r for r in records if r["phi"] == phi and r["flowing"] and r["n_snapshots"]]
+        runs = [r for r in records if r["phi"] == phi and r["n_flowing_snapshots"]]
         if not runs:
             continue
-        s = np.concatenate([np.full(r["n_snapshots"], r["stress"]) for r in runs])
+        s = np.concatenate([np.full(r["n_flowing_snapshots"], r["stress"]) for r in runs])
         jitter = np.exp(np.random.default_rng(0).normal(0, 0.03, s.size))
         snap = {k: np.concatenate([r["snapshots"][k] for r in runs]) for k in (*TARGETS, "shear_rate")}
         kw = dict(s=4, alpha=0.4, color=colour)
@@ -297,7 +306,7 @@ def plot_fig3(records: list[dict], path: Path) -> None:
     fig = plt.figure(figsize=(3.6 * len(phis), 7.2))
     grid = fig.add_gridspec(4, len(phis), height_ratios=[1, 3, 1, 3], hspace=0.35, wspace=0.3)
     for col, phi in enumerate(phis):
-        runs = [r for r in records if r["phi"] == phi and r["flowing"] and r["n_snapshots"]]
+        runs = [r for r in records if r["phi"] == phi and r["n_flowing_snapshots"]]
         if not runs:
             continue
         z = np.concatenate([r["snapshots"]["z_mu"] for r in runs])

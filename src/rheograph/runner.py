@@ -222,6 +222,7 @@ class _RunLoop:
             if s.strain >= p.strain:
                 return "completed"
             if self.stalled():
+                self._arrest_snapshot()
                 return "jammed"
             if stop.stop or (self.max_steps is not None and steps_here >= self.max_steps):
                 return "interrupted"
@@ -242,6 +243,13 @@ class _RunLoop:
                 self._row(result, before)
             if snap_due:
                 self._snapshot(result, before)
+
+    def _arrest_snapshot(self) -> None:
+        """One snapshot of the arrested packing when the flow stops: its Π and Z_μ are what a shear-jammed
+        state point is (the regular cadence, in strain, would never come round again)."""
+        s = self.sim.state
+        before = (s.time, s.strain, s.le_offset, s.positions.copy())
+        self._snapshot(self.sim.step(record=True), before)
 
     def _observables(self, result):
         n = self.sim.state.radii.shape[0]

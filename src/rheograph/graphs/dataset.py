@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch_geometric.data import Data, InMemoryDataset
 
+from rheograph.analysis import jammed_snapshots
 from rheograph.errors import InputError
 from rheograph.graphs.features import (
     EDGE_FEATURES,
@@ -25,6 +26,7 @@ from rheograph.graphs.features import (
     snapshot_edges,
 )
 from rheograph.io.hdf5 import SCHEMA_VERSION
+from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
 log = logging.getLogger("rheograph.graphs")
@@ -94,7 +96,11 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
         strain = sn["strain"][()]
         raw = np.stack([sn["viscosity"][()], sn["pressure"][()], sn["z_mu"][()]], axis=1)
         offsets = sn["le_offset"][()]
-        keep = np.flatnonzero((strain >= settings.min_strain) & np.isfinite(raw).all(axis=1))
+        jammed = jammed_snapshots(
+            status, strain, h5["timeseries/strain"][()], params.get("jam_intervals", SimParams.jam_intervals)
+        )
+        # an arrested packing is a state of its own, not a start-up transient: kept at any strain
+        keep = np.flatnonzero(((strain >= settings.min_strain) | jammed) & np.isfinite(raw).all(axis=1))
         positions = sn["positions"][keep] if keep.size else np.empty((0, radii.size, 2))
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
     known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
@@ -117,7 +123,7 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
                 area=torch.tensor([lx * ly], dtype=torch.float32),
                 descriptors=torch.from_numpy(snapshot_descriptors(pairs, radii.size, lx * ly)).view(1, -1),
                 n_particles=torch.tensor([radii.size]),
-                jammed=torch.tensor([status == "jammed"]),
+                jammed=torch.tensor([bool(jammed[idx])]),
                 phi=torch.tensor([params["phi"]], dtype=torch.float64),
                 stress=torch.tensor([params["stress"]], dtype=torch.float64),
                 strain=torch.tensor([strain[idx]], dtype=torch.float64),
@@ -149,7 +155,7 @@ class SnapshotGraphDataset(InMemoryDataset):
                 "settings": asdict(settings),
                 "files": _files_fingerprint(self.files),
                 "schema": SCHEMA_VERSION,
-                "version": 2,
+                "version": 3,  # 3: jammed per snapshot (after the flow stopped), kept at any strain
             },
             sort_keys=True,
             default=list,
