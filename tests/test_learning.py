@@ -258,6 +258,9 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     result = predict_file([run_dir / "fold0.pt"], tiny_files[2])
     split = json.loads((run_dir / "fold0_split.json").read_text())
     assert split["test"]
+    # no tiny run jammed: the jam rule says flowing everywhere and is right on every held-out trajectory
+    assert np.all(result["jammed_fraction"] == 0.0)
+    assert metrics["folds"][0]["test/jam_accuracy"] == 1.0 and metrics["folds"][0]["test/n_jammed_runs"] == 0
     for name in ("eta", "pressure", "z_mu"):
         assert np.all(np.isfinite(result[f"{name}_pred"]))
     both = np.intersect1d(np.round(saved["true"][:, 0], 9), np.round(result["eta_sim"], 9))

@@ -22,6 +22,7 @@ from torch_geometric.loader import DataLoader
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
+from rheograph.learn.jamming import fit_jam_map
 
 SPLITS = ("random", "grouped", "phi")
 
@@ -158,6 +159,13 @@ class SnapshotDataModule(L.LightningDataModule):
             "size_ratio": sorted({round(trajectory_param(f, "size_ratio"), 6) for f in self.files}),
             "edge_min": edges.min(dim=0).values.tolist(),
             "edge_max": edges.max(dim=0).values.tolist(),
+            # which trained state points jammed (rheograph.learn.jamming): the surrogate's jam rule
+            "jam_map": fit_jam_map(
+                dataset.phi[train].numpy(),
+                dataset.stress[train].numpy(),
+                dataset.run_id[train].numpy(),
+                dataset.jammed[train].numpy(),
+            ),
         }
 
     def split_record(self) -> dict:

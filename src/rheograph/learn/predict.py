@@ -12,7 +12,9 @@ Columns per target: ``*_pred`` (ensemble mean), ``*_pred_std`` (spread over the 
 disagreement, too narrow to be an error bar), ``*_pred_err`` (the cross-validated error bar of the
 training run's ``error_model.json``, rheograph.learn.error_model: one RMS of held-out residuals, in log10
 units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time — and absolute for
-Z_μ; absent for runs without an error model) and ``*_sim`` (the simulator's value).
+Z_μ; absent for runs without an error model) and ``*_sim`` (the simulator's value); ``jammed_fraction``:
+the share of training trajectories at the nearest trained state point that shear-jammed
+(rheograph.learn.jamming; jammed when >= 0.5).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import torch
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
 from rheograph.learn.error_model import predicted_error, read_error_model
+from rheograph.learn.jamming import jammed_fraction
 from rheograph.learn.module import TARGET_NAMES, SurrogateModule
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 
@@ -125,6 +128,8 @@ def predict_file(model_paths, trajectory: str | Path) -> dict:
         "phi": meta["phi"],
         "in_domain": in_domain.astype(np.int64),
     }
+    if "jam_map" in domain:  # bundles of older versions have none
+        out["jammed_fraction"] = jammed_fraction(domain["jam_map"], meta["phi"], meta["stress"])
     error_model = read_error_model(Path(sorted(model_paths)[0]).parent)
     errors = predicted_error(error_model, meta["stress"], meta["phi"]) if error_model else None
     for k, name in enumerate(TARGET_NAMES):

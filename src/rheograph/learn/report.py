@@ -80,6 +80,17 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
             "",
             f"{excluded} test graph(s) with a non-positive Π (true or predicted) left out of R² log Π.",
         ]
+    scored = [r for r in fold_results if "test/jam_accuracy" in r]
+    if scored:
+        runs = sum(int(r["test/n_runs"]) for r in scored)
+        jammed = sum(int(r["test/n_jammed_runs"]) for r in scored)
+        right = sum(r["test/jam_accuracy"] * r["test/n_runs"] for r in scored if r["test/n_runs"])
+        lines += [
+            "",
+            f"Shear jamming (rheograph.learn.jamming: jammed where ≥ half the training trajectories at the "
+            f"nearest state point jammed): right on {right:.0f} of {runs} test trajectories ({jammed} of "
+            "them jammed); η_r is not scored on jammed snapshots.",
+        ]
     lines += [
         "",
         "## Graph network per fold",

@@ -16,6 +16,7 @@ from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.error_model import fit_error_model, write_error_model
+from rheograph.learn.jamming import jam_rule_scores
 from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
 
 log = logging.getLogger("rheograph.train")
@@ -144,6 +145,8 @@ def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) 
     prediction = dict(fold=k, pred=pred, true=true, baselines=baselines, **meta)
     save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
     result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
+    jam = jam_rule_scores(dm.domain["jam_map"], meta["phi"], meta["stress"], meta["run_id"], meta["jammed"])
+    result.update({f"test/{name}": value for name, value in jam.items()})
     groups = meta["phi"] * 1e6 + meta["stress"]
     for name, value in fold_metrics(pred, true, groups, meta["jammed"]).items():
         result[f"test/{name}"] = value
@@ -227,9 +230,9 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
             stacked["pred"], stacked["true"], stacked["stress"], stacked["phi"], stacked["jammed"]
         )
         write_error_model(run_dir, model)
-    summary = {
-        key: float(np.mean([r[key] for r in fold_results])) for key in fold_results[0] if key != "fold"
-    }
+    # folds kept from an earlier version may lack newer metrics: those average over the folds that have them
+    keys = dict.fromkeys(key for r in fold_results for key in r if key != "fold")
+    summary = {key: float(np.nanmean([r.get(key, np.nan) for r in fold_results])) for key in keys}
     (run_dir / "metrics.json").write_text(
         json.dumps({"folds": fold_results, "mean": summary, "split": cfg.data.split}, indent=1)
     )
