@@ -29,6 +29,8 @@ from rheograph.collect import read_index  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
+from rheograph.learn.train import config_fingerprint  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (("r2_log_eta", "log η_r"), ("r2_log_pressure", "log Π"), ("r2_z_mu", "Z_μ"))
 # the seed paper's text (random split, N = 2000 and 400): R² >~ 0.99 for every target at φ <= 0.76,
@@ -46,6 +48,12 @@ def main(argv=None) -> None:
     ap.add_argument("--fold-workers", type=int, default=1, help="parallel fold processes (one per core)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "surrogate_per_phi"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument(
+        "--keep-earlier",
+        action="store_true",
+        help="report a (φ, N) whose 5 folds an earlier version of this command finished, even if the "
+        "configuration changed since (marked †), instead of retraining it",
+    )
     ap.add_argument("overrides", nargs="*", help="extra train.py overrides (after --)")
     args = ap.parse_args(argv)
     runs = read_index(ROOT / args.index)["runs"]
@@ -64,15 +72,20 @@ def main(argv=None) -> None:
             run_dir = Path(args.out) / f"N{n}_phi{phi:g}"
             stamp = run_dir / "train_minutes.txt"  # wall minutes of the invocation that trained the folds
             finished = (run_dir / "metrics.json").exists() and stamp.exists()
-            t0 = time.perf_counter()
-            train_or_resume(cfg, run_dir)
-            if not finished:
-                stamp.write_text(f"{(time.perf_counter() - t0) / 60:.2f}\n")
+            stale = finished and (run_dir / "config_fingerprint.txt").read_text().strip() != (
+                config_fingerprint(cfg)
+            )
+            if not (stale and args.keep_earlier):
+                t0 = time.perf_counter()
+                train_or_resume(cfg, run_dir)
+                if not finished or stale:
+                    stamp.write_text(f"{(time.perf_counter() - t0) / 60:.2f}\n")
+                stale = False
             minutes = float(stamp.read_text())
             for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:
                 shutil.rmtree(big, ignore_errors=True)
             folds = json.loads((run_dir / "metrics.json").read_text())["folds"]
-            results[(n, phi)] = (folds, minutes)
+            results[(n, phi)] = (folds, minutes, stale)
             print(n, phi, {k: np.mean([f[f"test/{k}"] for f in folds]) for k, _ in TARGETS}, flush=True)
     if not results:
         raise SystemExit("no (φ, N) with data")
@@ -112,7 +125,7 @@ def write(results: dict, args) -> None:
             base = [stats(results[(n, phi)][0], f"baseline/descriptors/{key}")[0] for phi in phis]
             axes[k].plot(phis, base, "k:", marker="x", label=f"trees, N = {n}" if k == 0 else None)
         for phi in phis:
-            folds, minutes = results[(n, phi)]
+            folds, minutes, stale = results[(n, phi)]
             cells = [f"{m:.3f} ± {s:.3f}" for m, s in (stats(folds, f"test/{key}") for key, _ in TARGETS)]
             trees = " / ".join(f"{stats(folds, f'baseline/descriptors/{key}')[0]:.3f}" for key, _ in TARGETS)
             paper = PAPER.get(round(phi, 2))
@@ -120,7 +133,9 @@ def write(results: dict, args) -> None:
                 " / ".join(f"{v:.2f}" for v in paper) if paper else ("≳ 0.99" if phi <= 0.76 else "–")
             )
             lines.append(
-                f"| {n} | {phi:.2f} | " + " | ".join(cells) + f" | {trees} | {paper_cell} | {minutes:.1f} |"
+                f"| {n} | {phi:.2f}{' †' if stale else ''} | "
+                + " | ".join(cells)
+                + f" | {trees} | {paper_cell} | {minutes:.1f} |"
             )
     for k, (_, label) in enumerate(TARGETS):
         paper_phi = [0.70, 0.72, 0.74, 0.76]
@@ -132,6 +147,12 @@ def write(results: dict, args) -> None:
     fig.tight_layout()
     (ROOT / "docs" / "figures").mkdir(parents=True, exist_ok=True)
     fig.savefig(ROOT / "docs" / "figures" / "surrogate_r2_vs_phi.png", dpi=110)
+    if any(stale for _, _, stale in results.values()):
+        lines += [
+            "",
+            "† trained by an earlier version of this command (same data, split and epochs; the training "
+            "configuration has gained keys since), kept with `--keep-earlier`; rerun without it to retrain.",
+        ]
     lines += [
         "",
         "![R² vs φ](figures/surrogate_r2_vs_phi.png)",

@@ -243,7 +243,7 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
     return summary
 
 
-def _config_fingerprint(cfg: DictConfig) -> str:
+def config_fingerprint(cfg: DictConfig) -> str:
     """Hash of everything that determines the trained folds (not which folds run, nor reporting)."""
     import hashlib
 
@@ -256,7 +256,7 @@ def check_resumable(cfg: DictConfig, run_dir: Path) -> None:
     """A run directory holds folds of one configuration: rerunning the same command into it (e.g.
     ``hydra.run.dir=<that run>``) resumes; another configuration is refused."""
     stamp = run_dir / "config_fingerprint.txt"
-    mine = _config_fingerprint(cfg)
+    mine = config_fingerprint(cfg)
     if stamp.exists() and stamp.read_text().strip() != mine:
         raise InputError(
             f"{run_dir} holds folds trained with another configuration: resume with the same overrides, "
