@@ -66,3 +66,37 @@ def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
         study2 = run_study(cfg2, tmp_path / "trials")
         assert len(study2.trials) == 4  # resumed from the same storage, one more trial
         assert study2.trials[0].params == study.trials[0].params
+
+
+def test_a_trial_whose_process_died_is_failed_and_retried(tmp_path):
+    """A RUNNING trial left by a killed process (its heartbeat stopped) is marked FAIL when the study is
+    resumed and retried once with the same parameters, instead of staying RUNNING for ever."""
+    import time
+
+    overrides = [
+        f"output_root={tmp_path}",
+        f"tune.storage=sqlite:///{tmp_path}/study.db",
+        f"tune.best_experiment_dir={tmp_path}/experiment",
+        "tune.n_trials=2",
+        "tune.heartbeat_seconds=1",
+        "tune.grace_seconds=1",
+    ]
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="tune", overrides=overrides)
+    storage = optuna.storages.RDBStorage(cfg.tune.storage, heartbeat_interval=1, grace_period=1)
+    killed = optuna.create_study(study_name=cfg.tune.study_name, storage=storage).ask(
+        {"model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True)}
+    )
+    storage.record_heartbeat(killed._trial_id)  # it was running, then its process was killed
+    time.sleep(2.5)
+    study = run_study(
+        cfg,
+        tmp_path / "trials",
+        objective=lambda trial: trial.suggest_float("model.lr", 1e-4, 1e-2, log=True),
+    )
+    states = [t.state for t in study.trials]
+    assert states[0] == optuna.trial.TrialState.FAIL  # no longer RUNNING
+    retried = [t for t in study.trials if t.system_attrs.get("failed_trial") == killed.number]
+    assert [t.state for t in retried] == [optuna.trial.TrialState.COMPLETE]
+    assert len(retried) == 1 and retried[0].params["model.lr"] == killed.params["model.lr"]
+    assert optuna.trial.TrialState.RUNNING not in states

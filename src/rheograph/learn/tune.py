@@ -4,13 +4,15 @@ Each trial composes ``conf/train.yaml`` with the fixed ``train_overrides`` and t
 calls :func:`rheograph.learn.train.train_folds` (the function behind ``train.py``).  The objective is the
 mean over folds of the best validation loss; it is reported after every fold so that the MedianPruner can
 stop hopeless trials early.  A trial that raises (diverged loss, bad sample, ...) is recorded as FAIL and
-the study goes on.  The study lives in an RDB storage (SQLite by default), so a second invocation resumes
+the study goes on; a trial whose process was killed is found by its missing heartbeat, failed and
+retried.  The study lives in an RDB storage (SQLite by default), so a second invocation resumes
 it and several workers can share one.  The best trial is written as a ready-to-use experiment config.
 """
 
 from __future__ import annotations
 
 import logging
+import warnings
 from pathlib import Path
 
 import optuna
@@ -84,9 +86,20 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     t = cfg.tune
     if objective is None:
         check_base_config(cfg)
+    # heartbeats: a trial whose process died (a killed session, a lost node) stops heartbeating and is
+    # marked FAIL when the study next runs, then retried once with the same parameters; without them
+    # it would stay RUNNING for ever
+    with warnings.catch_warnings():  # the retry callback is marked experimental (stable since 2.8)
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        storage = optuna.storages.RDBStorage(
+            t.storage,
+            heartbeat_interval=int(t.heartbeat_seconds),
+            grace_period=int(t.grace_seconds),
+            heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=1),
+        )
     study = optuna.create_study(
         study_name=t.study_name,
-        storage=t.storage,
+        storage=storage,
         load_if_exists=True,
         direction=t.direction,
         sampler=optuna.samplers.TPESampler(seed=t.sampler_seed),
