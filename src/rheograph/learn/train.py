@@ -196,7 +196,9 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
     the objective of the hyperparameter search.  ``trial`` (optuna) gets per-fold intermediate values.
     """
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    threads = int(cfg.get("threads") or 0) or max(1, min(2, os.cpu_count() or 1))
+    # default: the cores this process may run on (taskset, a SLURM cpuset), at most 2 — not the machine's
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    threads = int(cfg.get("threads") or 0) or max(1, min(2, usable))
     torch.set_num_threads(threads)
     ensure_dataset(cfg)
     settings = graph_settings(cfg)
