@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -234,7 +235,9 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
         write_error_model(run_dir, model)
     # folds kept from an earlier version may lack newer metrics: those average over the folds that have them
     keys = dict.fromkeys(key for r in fold_results for key in r if key != "fold")
-    summary = {key: float(np.nanmean([r.get(key, np.nan) for r in fold_results])) for key in keys}
+    with warnings.catch_warnings():  # a metric undefined in every fold (e.g. no jammed run) stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        summary = {key: float(np.nanmean([r.get(key, np.nan) for r in fold_results])) for key in keys}
     (run_dir / "metrics.json").write_text(
         json.dumps({"folds": fold_results, "mean": summary, "split": cfg.data.split}, indent=1)
     )
