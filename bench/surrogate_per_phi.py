@@ -150,8 +150,10 @@ def write(results: dict, args) -> None:
     if any(stale for _, _, stale in results.values()):
         lines += [
             "",
-            "† trained by an earlier version of this command (same data, split and epochs; the training "
-            "configuration has gained keys since), kept with `--keep-earlier`; rerun without it to retrain.",
+            "† trained by an earlier version of this command (same data and epochs; the training "
+            "configuration or the fold assignment has changed since: these rows used consecutive folds, "
+            "which leave 1 of a state point's 3 runs in training, not 2), kept with `--keep-earlier`; "
+            "rerun without it to retrain.",
         ]
     lines += [
         "",

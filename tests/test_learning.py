@@ -138,6 +138,21 @@ def test_grouped_folds_spread_each_state_point_over_folds():
             assert (training & (strata == s)).any()
 
 
+def test_two_runs_per_state_point_keep_one_in_training_for_every_test_fold():
+    """N = 2000 has two seeds per state point: with fold k tested and k + 1 validating, the second run
+    of every tested state point must be in the training part, or a held-out trajectory becomes an unseen
+    stress (consecutive folds put it in the validation fold: sigma/sigma0 = 0.5 was extrapolated)."""
+    runs = np.repeat(np.arange(20), 4)
+    strata = runs // 2
+    for seed in range(5):
+        folds = kfold_assignment(runs.size, 5, seed=seed, groups=runs, strata=strata)
+        assert [np.unique(runs[folds == f]).size for f in range(5)] == [4] * 5
+        for k in range(5):
+            training = (folds != k) & (folds != (k + 1) % 5)
+            for s in np.unique(strata[folds == k]):
+                assert (training & (strata == s)).any(), (seed, k, s)
+
+
 @pytest.mark.parametrize("split", ["random", "grouped"])
 def test_datamodule_splits_and_scaling(tiny_files, tmp_path, split):
     seen = []

@@ -27,6 +27,11 @@ from rheograph.learn.jamming import fit_jam_map
 SPLITS = ("random", "grouped", "phi")
 
 
+# bumped when the fold assignment changes, so that run directories trained on other splits are not
+# resumed as if they were the same configuration (rheograph.learn.train.config_fingerprint)
+SPLIT_VERSION = 2  # 2: state points' runs in every other fold (1: consecutive folds)
+
+
 def kfold_assignment(
     n_items: int,
     num_folds: int,
@@ -37,8 +42,12 @@ def kfold_assignment(
     """Fold index (0..K-1) of every item; with ``groups`` all items of a group share a fold.
 
     With ``strata`` (one label per item, constant within a group: the state point of a run) the groups
-    of each stratum go to consecutive folds, continuing where the previous stratum ended, so that folds
-    hold equal numbers of groups and a stratum with g groups appears in min(g, K) folds.
+    of each stratum go to every other fold (f, f + 2, f + 4, ... mod K), continuing where the previous
+    stratum ended, so that folds hold equal numbers of groups and a stratum with g groups appears in
+    min(g, K) folds.  Every other, not consecutive: fold k is tested with fold k + 1 as validation, so
+    with consecutive folds a state point with two runs (N = 2000) would have its second run in the
+    validation fold and none in training, turning a held-out trajectory into an unseen stress.  With
+    odd K (default 5) each state point with >= 2 runs keeps one in training for every test fold.
     """
     rng = np.random.default_rng(seed)
     if groups is None:
@@ -51,12 +60,18 @@ def kfold_assignment(
         raise InputError(f"grouped split needs at least num_folds={num_folds} runs, got {unique.size}")
     if strata is not None:
         stratum_of = {g: strata[np.flatnonzero(groups == g)[0]] for g in unique}
-        fold_of, next_fold = {}, int(rng.integers(num_folds))
+        # every other fold; for even K the evens then the odds (not every pair avoids k, k + 1 there)
+        order = (
+            [(2 * i) % num_folds for i in range(num_folds)]
+            if num_folds % 2
+            else (list(range(0, num_folds, 2)) + list(range(1, num_folds, 2)))
+        )
+        fold_of, position = {}, int(rng.integers(num_folds))
         for stratum in sorted(set(stratum_of.values())):
             members = rng.permutation([g for g in unique if stratum_of[g] == stratum])
             for g in members:
-                fold_of[g] = next_fold
-                next_fold = (next_fold + 1) % num_folds
+                fold_of[g] = order[position]
+                position = (position + 1) % num_folds
         return np.array([fold_of[g] for g in groups], dtype=np.int64)
     # greedy balancing: largest groups first into the currently smallest fold (ties broken by seed)
     sizes = {g: int(np.sum(groups == g)) for g in unique}

@@ -16,6 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
+from rheograph.learn.datamodule import SPLIT_VERSION
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
 from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
@@ -254,6 +255,7 @@ def config_fingerprint(cfg: DictConfig) -> str:
 
     skip = ("fold", "report", "threads", "fold_workers")  # how and which folds run, not what they learn
     keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in skip}
+    keep["split_version"] = SPLIT_VERSION  # the fold assignment is code, not configuration
     return hashlib.sha1(json.dumps(keep, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
