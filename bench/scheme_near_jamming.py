@@ -99,6 +99,13 @@ def collect(phi: float) -> list[dict]:
         # sigma / (shear rate at one step), which changes sign when the packing rattles at a standstill
         interval_viscosity = p["stress"] * np.diff(time) / np.maximum(np.diff(strain), 1e-12)
         d_time, d_strain = np.diff(time)[flowing].sum(), np.diff(strain)[flowing].sum()
+        # the same over 0.1-strain blocks after the first 0.2 strain, for a mean with a standard error
+        blocks = []
+        for low in np.arange(0.2, strain[-1] - 0.1 + 1e-9, 0.1) if len(strain) else []:
+            rows_in = np.flatnonzero((strain >= low) & (strain < low + 0.1))
+            if rows_in.size > 2 and strain[rows_in[-1]] > strain[rows_in[0]]:
+                span = strain[rows_in[-1]] - strain[rows_in[0]]
+                blocks.append(p["stress"] * (time[rows_in[-1]] - time[rows_in[0]]) / span)
         rows.append(
             dict(
                 seed=p["seed"],
@@ -110,6 +117,11 @@ def collect(phi: float) -> list[dict]:
                 strain=strain[1:][flowing],
                 viscosity=interval_viscosity[flowing],
                 mean_viscosity=float(p["stress"] * d_time / d_strain) if d_strain > 0 else float("nan"),
+                block_viscosity=(
+                    (float(np.mean(blocks)), float(np.std(blocks, ddof=1) / np.sqrt(len(blocks))))
+                    if len(blocks) > 2
+                    else (float("nan"), float("nan"))
+                ),
                 steps_per_strain=float(ts["steps"][-1] / strain[-1]) if len(strain) else float("nan"),
                 cpu_seconds=float(info["summary"].get("cpu_seconds", float("nan"))),
             )
@@ -154,13 +166,19 @@ def plot(args) -> None:
     print(f"wrote {out.relative_to(ROOT)}")
     print(
         "| σ/σ0 | seed | scheme | disp_max | status | strain reached | η_r = σ Δt/Δγ before jamming "
-        "| steps/strain | CPU s |"
+        "| η_r, 0.1-strain blocks from 0.2 (± s.e.) | steps/strain | CPU s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in sorted(rows, key=lambda r: (-r["stress"], r["seed"], r["scheme"], -r["disp_max"])):
         print(
             f"| {r['stress']:g} | {r['seed']} | {r['scheme']} | {r['disp_max']:g} | {r['status']} | "
-            f"{r['strain_reached']:.2f} | {r['mean_viscosity']:.0f} | {r['steps_per_strain']:.3g} | "
+            f"{r['strain_reached']:.2f} | {r['mean_viscosity']:.0f} | "
+            + (
+                f"{r['block_viscosity'][0]:.0f} ± {r['block_viscosity'][1]:.0f}"
+                if np.isfinite(r["block_viscosity"][0])
+                else "–"
+            )
+            + f" | {r['steps_per_strain']:.3g} | "
             f"{r['cpu_seconds']:.0f} |"
         )
 
