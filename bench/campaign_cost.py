@@ -27,7 +27,7 @@ from rheograph.collect import read_index
 from rheograph.dataset_card import run_cpu_seconds
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import write_section  # noqa: E402
+from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 STRESSES = (0.5, 1, 2, 3, 5, 10, 20, 50, 100, 200)
@@ -140,10 +140,7 @@ def main() -> None:
         + args.index
         + (f" --extra '{args.extra}'" if args.extra else "")
     )
-    text = render(rows, extra, command)
-    print(text)
-    if not args.no_write:
-        write_section(ROOT / "docs" / "benchmarks.md", "campaign_cost", text)
+    publish("campaign_cost", render(rows, extra, command), write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ from rheograph.sim.params import SimParams  # noqa: E402
 from rheograph.sim.solver import CholmodSolver  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import write_section  # noqa: E402
+from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -177,10 +177,7 @@ def main() -> None:
         "",
         "Command: `python bench/factor_reuse.py " + " ".join(sys.argv[1:]).replace(" --no-write", "") + "`",
     ]
-    text = "\n".join(lines)
-    print(text)
-    if not args.no_write:
-        write_section(ROOT / "docs" / "benchmarks.md", "factor_reuse", text)
+    publish("factor_reuse", "\n".join(lines), write=not args.no_write)
 
 
 if __name__ == "__main__":

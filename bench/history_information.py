@@ -27,6 +27,9 @@ from rheograph.graphs.features import snapshot_descriptors, snapshot_pairs
 from rheograph.learn.module import r2_score
 from rheograph.sim.geometry import pair_geometry
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import publish  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = {"log η_r": "viscosity", "log Π": "pressure", "Z_μ": "z_mu"}
 
@@ -121,12 +124,7 @@ def main(argv=None) -> None:
                 f"| {phi:.2f} | {table['seed'].size} | {label} | " + " | ".join(f"{v:.4f}" for v in r2) + " |"
             )
     lines += ["", f"Command: `python bench/history_information.py --phi {' '.join(map(str, args.phi))}`"]
-    print("\n".join(lines))
-    if not args.no_write:
-        sys.path.insert(0, str(ROOT / "bench"))
-        from simulate_speed import write_section
-
-        write_section(ROOT / "docs" / "benchmarks.md", "history_information", "\n".join(lines))
+    publish("history_information", "\n".join(lines), write=not args.no_write)
 
 
 if __name__ == "__main__":

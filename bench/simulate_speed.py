@@ -126,6 +126,13 @@ def main() -> None:
         write_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
 
 
+def publish(section: str, text: str, write: bool) -> None:
+    """Print a result section and (unless the script's --no-write) replace it in docs/benchmarks.md."""
+    print(text)
+    if write:
+        write_section(ROOT / "docs" / "benchmarks.md", section, text)
+
+
 def write_section(path: Path, name: str, body: str) -> None:
     """Replace the text between <!-- name:start --> and <!-- name:end --> (appending it if absent)."""
     start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"

@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402
 from rheograph.collect import read_index  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import publish  # noqa: E402
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 from rheograph.learn.train import config_fingerprint  # noqa: E402
@@ -168,12 +169,7 @@ def write(results: dict, args) -> None:
         + (" -- " + " ".join(args.overrides) if args.overrides else "")
         + "`",
     ]
-    print("\n".join(lines))
-    if not args.no_write:
-        sys.path.insert(0, str(ROOT / "bench"))
-        from simulate_speed import write_section
-
-        write_section(ROOT / "docs" / "benchmarks.md", "surrogate_per_phi", "\n".join(lines))
+    publish("surrogate_per_phi", "\n".join(lines), write=not args.no_write)
 
 
 if __name__ == "__main__":

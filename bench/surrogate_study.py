@@ -174,11 +174,9 @@ def main(argv=None) -> None:
         + " ".join(args.runs)
         + "`; reports: docs/results/surrogate_study/.",
     ]
-    print("\n".join(lines))
-    if not args.no_write:
-        from simulate_speed import write_section
+    from simulate_speed import publish
 
-        write_section(ROOT / "docs" / "benchmarks.md", "surrogate_study", "\n".join(lines))
+    publish("surrogate_study", "\n".join(lines), write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
 from rheograph.learn.predict import predict_file  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import publish  # noqa: E402
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -121,13 +122,8 @@ def main(argv=None) -> None:
         + " ".join(map(str, args.train_seeds))
         + f" --test-seed {args.test_seed} --epochs {args.epochs}`",
     ]
-    print("\n".join(lines))
     (run_dir / "summary.json").write_text(json.dumps({"lines": lines}))
-    if not args.no_write:
-        sys.path.insert(0, str(ROOT / "bench"))
-        from simulate_speed import write_section
-
-        write_section(ROOT / "docs" / "benchmarks.md", "surrogate_uncertainty", "\n".join(lines))
+    publish("surrogate_uncertainty", "\n".join(lines), write=not args.no_write)
 
 
 if __name__ == "__main__":
