@@ -332,7 +332,11 @@ def main(argv=None) -> None:
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument(
         "--command",
-        default="python simulate.py -m experiment=dataset_paper_n400",
+        default=(
+            "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.70-0.78\n"
+            "python simulate.py -m experiment=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)\n"
+            "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.76   # N = 2000, two seeds"
+        ),
         help="the command that regenerates the set (quoted in the card)",
     )
     args = ap.parse_args(argv)
