@@ -91,7 +91,7 @@ def render(rows: list[dict], extra: list[dict], command: str) -> str:
     sizes = sorted({(n, phi) for n, phi, _ in by_point})
     lines = [
         "CPU seconds per unit strain (median over seeds) of the committed dataset runs (implicit, disp_max "
-        "2e-3), per σ/σ0; *grid* = CPU hours the full grid costs at that (N, φ): 10 stresses × the planned "
+        "2e-3; 1e-3 at φ = 0.80), per σ/σ0; *grid* = CPU hours the full grid costs at that (N, φ): 10 stresses × the planned "
         f"seeds (N = 400: {SEEDS_PLANNED[400]}, N = 2000: {SEEDS_PLANNED[2000]}) × {STRAIN_PLANNED:g} "
         "strain, "
         "from the medians (missing stresses: –, and the grid is a lower bound).",
