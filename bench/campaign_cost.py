@@ -15,16 +15,16 @@ from __future__ import annotations
 
 import argparse
 import glob
-import json
 import sys
 from collections import defaultdict
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from rheograph.collect import read_index
 from rheograph.dataset_card import run_cpu_seconds
+from rheograph.io.hdf5 import read_run_info
+from rheograph.sim.params import scheme_name
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import publish  # noqa: E402
@@ -39,48 +39,37 @@ def seconds_per_strain(path: Path, strain: float) -> float:
     return run_cpu_seconds(path) / strain if strain > 0 else float("nan")
 
 
+def run_row(path: Path, params: dict, status: str, strain: float) -> dict:
+    """The state point, outcome and CPU seconds per strain of one run."""
+    return dict(
+        n=params["n_particles"],
+        phi=round(params["phi"], 4),
+        stress=params["stress"],
+        seed=params["seed"],
+        scheme=scheme_name(params["integrator"], params.get("lagged_step_control", False)),
+        disp=params["disp_max"],
+        status=status,
+        strain=strain,
+        cost=seconds_per_strain(path, strain),
+    )
+
+
 def dataset_rows(index_path: Path) -> list[dict]:
-    rows = []
-    for entry in read_index(index_path)["runs"]:
-        p = entry["params"]
-        if entry["status"] == "running":
-            continue
-        rows.append(
-            dict(
-                n=p["n_particles"],
-                phi=round(p["phi"], 4),
-                stress=p["stress"],
-                status=entry["status"],
-                cost=seconds_per_strain(Path(entry["path"]), entry["strain"]),
-            )
-        )
-    return rows
+    return [
+        run_row(Path(e["path"]), e["params"], e["status"], e["strain"])
+        for e in read_index(index_path)["runs"]
+        if e["status"] != "running"
+    ]
 
 
 def extra_rows(pattern: str) -> list[dict]:
     rows = []
     for name in sorted(glob.glob(pattern)):
         try:
-            with h5py.File(name, "r") as h5:
-                p = json.loads(h5.attrs["params"])
-                status = str(h5.attrs["status"])
-                strain = float(h5["checkpoint"].attrs["strain"])
+            info = read_run_info(name)
         except OSError:  # being written by a running simulation
             continue
-        scheme = p["integrator"] + ("-lagged" if p.get("lagged_step_control") else "")
-        rows.append(
-            dict(
-                n=p["n_particles"],
-                phi=round(p["phi"], 4),
-                stress=p["stress"],
-                seed=p["seed"],
-                scheme=scheme,
-                disp=p["disp_max"],
-                status=status,
-                strain=strain,
-                cost=seconds_per_strain(Path(name), strain),
-            )
-        )
+        rows.append(run_row(Path(name), info["params"], info["status"], info["strain"]))
     return rows
 
 
@@ -91,7 +80,8 @@ def render(rows: list[dict], extra: list[dict], command: str) -> str:
     sizes = sorted({(n, phi) for n, phi, _ in by_point})
     lines = [
         "CPU seconds per unit strain (median over seeds) of the committed dataset runs (implicit, disp_max "
-        "2e-3; 1e-3 at φ = 0.80), per σ/σ0; *grid* = CPU hours the full grid costs at that (N, φ): 10 stresses × the planned "
+        "2e-3; 1e-3 at φ = 0.80), per σ/σ0; *grid* = CPU hours the full grid costs at that (N, φ): "
+        "10 stresses × the planned "
         f"seeds (N = 400: {SEEDS_PLANNED[400]}, N = 2000: {SEEDS_PLANNED[2000]}) × {STRAIN_PLANNED:g} "
         "strain, "
         "from the medians (missing stresses: –, and the grid is a lower bound).",
