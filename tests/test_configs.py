@@ -42,3 +42,42 @@ def test_training_experiments_compose(name):
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"experiment={name}"])
     assert cfg.data.num_folds >= 2 and cfg.trainer.max_epochs >= 1
+
+
+@pytest.mark.parametrize("inputs", ["physics", "paper", "physics_positions"])
+def test_search_configs_compose_one_study_per_input_variant(inputs):
+    """Each study's fixed overrides and every corner of its search space compose a valid training
+    config, and the study is named after its input variant (one study per variant, issue #12)."""
+    from rheograph.learn.train import folds_to_train
+    from rheograph.learn.tune import fixed_overrides
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="tune", overrides=["hparams_search=held_out_phi076", f"inputs={inputs}"])
+        assert cfg.tune.study_name == f"{inputs}_phi076"
+        base = fixed_overrides(cfg)
+        assert f"graph={inputs}" in base
+        space = OmegaConf.to_container(cfg.tune.search_space)
+        for corner in ("low", "high"):
+            sampled = []
+            for name, spec in space.items():
+                value = spec[corner] if corner in spec else spec["choices"][0 if corner == "low" else -1]
+                sampled.append(f"{name}={list(value) if isinstance(value, list) else value}")
+            train = compose(config_name="train", overrides=base + sampled)
+            assert folds_to_train(train) == [0]
+            assert (
+                train.graph.edge_features
+                == compose(config_name="train", overrides=[f"graph={inputs}"]).graph.edge_features
+            )
+
+
+def test_folds_to_train_accepts_all_one_or_a_list_and_names_the_range():
+    from rheograph.errors import InputError
+    from rheograph.learn.train import folds_to_train
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        assert folds_to_train(compose(config_name="train")) == [0, 1, 2, 3, 4]
+        assert folds_to_train(compose(config_name="train", overrides=["fold=3"])) == [3]
+        assert folds_to_train(compose(config_name="train", overrides=["fold=[0,2]"])) == [0, 2]
+        for bad in ("fold=5", "fold=[0,7]", "fold=[]", "fold=-1"):
+            with pytest.raises(InputError, match=r"fold=.*0\.\.4"):
+                folds_to_train(compose(config_name="train", overrides=[bad]))

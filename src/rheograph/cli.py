@@ -49,7 +49,7 @@ def train_main(cfg: DictConfig) -> float:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     from hydra.core.hydra_config import HydraConfig
 
-    from rheograph.learn.train import train_folds
+    from rheograph.learn.train import folds_to_train, train_folds
 
     # Lightning's per-fold banners (GPU/TPU availability, advertising tips) drown the useful log lines
     logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
@@ -67,7 +67,7 @@ def train_main(cfg: DictConfig) -> float:
         "test R² (%s, mean of %d fold(s)): log η_r %.3f, log Π %.3f, Z_μ %.3f | descriptor baseline "
         "%.3f, %.3f, %.3f",
         held_out,
-        int(cfg.data.num_folds) if cfg.get("fold") is None else 1,
+        len(folds_to_train(cfg)),
         summary["test/r2_log_eta"],
         summary["test/r2_log_pressure"],
         summary["test/r2_z_mu"],

@@ -194,6 +194,9 @@ class SurrogateModule(L.LightningModule):
         self.log(
             f"{stage}/loss", loss, batch_size=size, on_epoch=True, on_step=False, prog_bar=stage == "val"
         )
+        # the unweighted sum: comparable between models trained with different loss_weights (the
+        # hyperparameter search's objective)
+        self.log(f"{stage}/target_loss", per_target.sum(), batch_size=size, on_epoch=True, on_step=False)
         for k, name in enumerate(TARGET_NAMES):
             self.log(f"{stage}/loss_{name}", per_target[k], batch_size=size, on_epoch=True, on_step=False)
         pred = (z * self.target_std + self.target_mean).detach()

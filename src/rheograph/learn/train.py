@@ -111,14 +111,17 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
     return dm, module
 
 
-def train_fold(cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings) -> tuple[dict, dict]:
-    """Train, test and save fold ``k``; returns (result row, test predictions with baselines)."""
+def train_fold(
+    cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings, extra_callbacks: list = ()
+) -> tuple[dict, dict]:
+    """Train, test and save fold ``k``; returns (result row, test predictions with baselines).
+    ``extra_callbacks`` join the configured Lightning callbacks (the search's per-epoch pruning)."""
     import lightning as L
 
     L.seed_everything(int(cfg.seed) + k, workers=True)
     dm, module = setup_fold(cfg, k, settings)
     dm.save_split(run_dir / f"fold{k}_split.json")
-    callbacks = [instantiate(c) for c in cfg.callbacks.values()]
+    callbacks = [instantiate(c) for c in cfg.callbacks.values()] + list(extra_callbacks)
     logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
     trainer = instantiate(
         cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=str(run_dir / f"fold{k}")
@@ -191,11 +194,26 @@ def train_folds_in_processes(cfg: DictConfig, run_dir: Path, folds: list[int]) -
             future.result()  # re-raises a fold's error here
 
 
-def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
+def folds_to_train(cfg: DictConfig) -> list[int]:
+    """The folds ``cfg.fold`` selects: null = all ``data.num_folds``, an integer or a list of them."""
+    num_folds = int(cfg.data.num_folds)
+    chosen = cfg.get("fold")
+    if chosen is None:
+        return list(range(num_folds))
+    folds = [chosen] if isinstance(chosen, int) else list(chosen)
+    if not folds or any(not isinstance(k, int) or not 0 <= k < num_folds for k in folds):
+        raise InputError(
+            f"fold={chosen} is invalid: null, or an integer or list of integers in 0..{num_folds - 1}"
+        )
+    return folds
+
+
+def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     """Train the configured folds; write bundles, splits, predictions and the report into ``run_dir``.
 
-    Returns the mean (over folds) of every test metric plus ``val/loss`` (the mean best validation loss),
-    the objective of the hyperparameter search.  ``trial`` (optuna) gets per-fold intermediate values.
+    Returns the mean (over folds) of every test metric plus ``val/loss`` (the mean best validation loss).
+    ``fold_callbacks(position, k)`` (the hyperparameter search) returns extra Lightning callbacks for the
+    ``position``-th trained fold ``k``; folds then train in this process, one after the other.
     """
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     # default: the cores this process may run on (taskset, a SLURM cpuset), at most 2 — not the machine's
@@ -206,27 +224,21 @@ def train_folds(cfg: DictConfig, run_dir: Path, trial=None) -> dict:
     settings = graph_settings(cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
     check_resumable(cfg, run_dir)
-    num_folds = int(cfg.data.num_folds)
-    folds = range(num_folds) if cfg.get("fold") is None else [int(cfg.fold)]
+    folds = folds_to_train(cfg)
     workers = int(cfg.get("fold_workers") or 1)
-    if workers > 1 and trial is None and len(folds) > 1:
+    if workers > 1 and fold_callbacks is None and len(folds) > 1:
         train_folds_in_processes(cfg, run_dir, [k for k in folds if load_finished_fold(run_dir, k) is None])
     fold_results, predictions = [], []
-    for k in folds:
+    for position, k in enumerate(folds):
         finished = load_finished_fold(run_dir, k)
         if finished is not None:  # a resumed run (or a fold process) finished it: kept
             log.info("fold %d finished (earlier invocation or fold process): kept", k)
             result, prediction = finished
         else:
-            result, prediction = train_fold(cfg, run_dir, k, settings)
+            extra = fold_callbacks(position, k) if fold_callbacks is not None else []
+            result, prediction = train_fold(cfg, run_dir, k, settings, extra)
         fold_results.append(result)
         predictions.append(prediction)
-        if trial is not None:
-            trial.report(float(np.mean([r["val/loss"] for r in fold_results])), step=len(fold_results))
-            if trial.should_prune():
-                import optuna
-
-                raise optuna.TrialPruned(f"pruned after fold {k}")
     stacked = _stack_predictions(predictions)
     np.savez(run_dir / "test_predictions.npz", **stacked)
     if cfg.data.split != "random":  # held-out trajectories (or phi): residuals of unseen data only

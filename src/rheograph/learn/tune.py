@@ -1,12 +1,16 @@
 """Hyperparameter search: a small driver over Optuna (>= 4) and ``hydra.compose``.
 
 Each trial composes ``conf/train.yaml`` with the fixed ``train_overrides`` and the sampled values, then
-calls :func:`rheograph.learn.train.train_folds` (the function behind ``train.py``).  The objective is the
-mean over folds of the best validation loss; it is reported after every fold so that the MedianPruner can
-stop hopeless trials early.  A trial that raises (diverged loss, bad sample, ...) is recorded as FAIL and
-the study goes on; a trial whose process was killed is found by its missing heartbeat, failed and
-retried.  The study lives in an RDB storage (SQLite by default), so a second invocation resumes
-it and several workers can share one.  The best trial is written as a ready-to-use experiment config.
+calls :func:`rheograph.learn.train.train_folds` (the function behind ``train.py``) on the folds the
+training config selects (``fold``: all, one, or a list).  The objective is the mean over those folds of
+the best epoch's ``tune.metric`` (default ``val/target_loss``: the unweighted sum of the per-target
+validation losses, comparable between trials whatever their ``loss_weights``; with ``data.split=grouped``
+a loss on held-out trajectories).  It is reported after every epoch, so that the MedianPruner stops
+hopeless trials within their first fold.  A trial that raises (diverged loss, bad sample, ...) is
+recorded as FAIL and the study goes on; a trial whose process was killed is found by its missing
+heartbeat, failed and retried.  The study lives in an RDB storage (SQLite by default), so a second
+invocation resumes it and several workers can share one.  The best trial is written as a ready-to-use
+experiment config.
 """
 
 from __future__ import annotations
@@ -15,8 +19,10 @@ import logging
 import warnings
 from pathlib import Path
 
+import numpy as np
 import optuna
 from hydra import compose
+from lightning.pytorch.callbacks import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from rheograph.errors import InputError
@@ -50,18 +56,58 @@ def _override(name: str, value) -> str:
     return f"{name}={value}"
 
 
+def fixed_overrides(cfg: DictConfig) -> list[str]:
+    """The study's ``train_overrides``, interpolations resolved (e.g. ``graph=${inputs}``)."""
+    return [str(o) for o in OmegaConf.to_container(cfg.train_overrides, resolve=True)]
+
+
+class EpochReporter(Callback):
+    """Reports ``metric`` after every validation epoch of one fold to the trial (step: epochs trained
+    by the trial so far, so that the pruner compares trials at equal training), keeps the fold's best,
+    and ends the trial when the pruner says so."""
+
+    def __init__(self, trial: optuna.Trial, metric: str, first_step: int):
+        self.trial, self.metric, self.first_step = trial, metric, first_step
+        self.best = float("inf")
+
+    def on_validation_epoch_end(self, trainer, pl_module) -> None:
+        if trainer.sanity_checking:
+            return
+        if self.metric not in trainer.callback_metrics:
+            raise InputError(
+                f"tune.metric={self.metric!r} is not logged; logged: {sorted(trainer.callback_metrics)}"
+            )
+        value = float(trainer.callback_metrics[self.metric])
+        self.best = min(self.best, value)
+        step = self.first_step + trainer.current_epoch
+        self.trial.report(value, step=step)
+        if self.trial.should_prune():
+            raise optuna.TrialPruned(f"pruned at epoch {trainer.current_epoch}: {self.metric} = {value:.4g}")
+
+
 def make_objective(cfg: DictConfig, run_root: Path):
     space = OmegaConf.to_container(cfg.tune.search_space, resolve=True)
-    base = list(cfg.train_overrides)
+    base = fixed_overrides(cfg)
+    metric = str(cfg.tune.metric)
 
     def objective(trial: optuna.Trial) -> float:
         overrides = [_override(name, suggest(trial, name, spec)) for name, spec in space.items()]
         trial.set_user_attr("overrides", overrides)
         train_cfg = compose(config_name="train", overrides=base + overrides)
-        summary = train_folds(train_cfg, run_root / f"trial_{trial.number:04d}", trial=trial)
+        epochs = int(train_cfg.trainer.max_epochs)
+        reporters: list[EpochReporter] = []
+
+        def fold_callbacks(position: int, k: int) -> list:
+            reporters.append(EpochReporter(trial, metric, first_step=position * epochs))
+            return [reporters[-1]]
+
+        summary = train_folds(train_cfg, run_root / f"trial_{trial.number:04d}", fold_callbacks)
         for key, value in summary.items():
             trial.set_user_attr(key, value)
-        return summary["val/loss"]
+        value = float(np.mean([r.best for r in reporters]))
+        if not np.isfinite(value):
+            raise FloatingPointError(f"trial {trial.number}: {metric} = {value}")
+        return value
 
     return objective
 
@@ -73,7 +119,7 @@ def check_base_config(cfg: DictConfig) -> None:
 
     from rheograph.learn.train import graph_settings
 
-    train_cfg = compose(config_name="train", overrides=list(cfg.train_overrides))
+    train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
     instantiate(train_cfg.data, graph=graph_settings(train_cfg), fold=0, _convert_="all").setup()
     for name, spec in OmegaConf.to_container(cfg.tune.search_space, resolve=True).items():
         if spec.get("type") not in ("categorical", "int", "float"):
@@ -120,7 +166,7 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     log.info("trials: %s", {s.name: n for s, n in states.items() if n})
     if any(tr.state == optuna.trial.TrialState.COMPLETE for tr in study.trials):
         space = OmegaConf.to_container(t.search_space, resolve=True)
-        path = write_best_experiment(study, Path(t.best_experiment_dir), list(cfg.train_overrides), space)
+        path = write_best_experiment(study, Path(t.best_experiment_dir), fixed_overrides(cfg), space)
         log.info("best trial %d: val/loss = %.4g -> %s", study.best_trial.number, study.best_value, path)
     return study
 
