@@ -10,8 +10,10 @@ Variants (config groups of conf/): ``paper`` = graph=paper model=resgcn (the see
 features, softmax aggregation, mean pooling, positions only); ``physics_positions`` = physics-aware edge
 features, positions only; ``physics`` = physics-aware features + imposed stress (graph input and CLM
 load); ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
-stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation.
-Every run trains the K folds with the same epochs, batch size and seed.
+stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation;
+``<inputs>_tuned`` = the best trial of that input variant's Optuna study
+(``conf/experiment/<inputs>_phi076_best.yaml``, its own batch size).  Every run trains the K folds with
+the same epochs and seed.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ VARIANTS = {
     "physics": ["graph=physics", "model=resgcn_physics"],
     "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
     "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
+    # the best trial of each input variant's Optuna study (bench/tune_report.py), with its batch size
+    **{f"{v}_tuned": [f"experiment={v}_phi076_best"] for v in ("physics", "paper", "physics_positions")},
 }
 COLUMNS = [
     ("r2_log_eta", "R² log η_r"),
@@ -89,8 +93,12 @@ def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
     extra = [*VARIANTS[name], f"seed={args.seed}"]
     if name == "paper":  # the paper's constant learning rate over the same epoch budget
         extra.append("model.lr_schedule=constant")
+    batch_size = args.batch_size
+    if name.endswith("_tuned"):  # the tuned batch size, not the study's common one
+        with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+            batch_size = int(compose(config_name="train", overrides=VARIANTS[name]).data.batch_size)
     cfg = benchmark_config(
-        args.files, args.phi, 400, split, args.epochs, args.fold_workers, args.batch_size, extra
+        args.files, args.phi, 400, split, args.epochs, args.fold_workers, batch_size, extra
     )
     run_dir = out / f"{name}_{split}"
     if args.reuse and (run_dir / "metrics.json").exists():  # a finished run of an earlier invocation
@@ -158,8 +166,9 @@ def main(argv=None) -> None:
             + f" | {cell(folds, f'baseline/{b}/fluct_eta')} | – |"
         )
     lines = [
-        f"φ = {args.phi}, N = 400, {args.epochs} epochs, batch {args.batch_size}, 5 folds, mean ± std over "
-        "folds of the test fold.  grouped: whole trajectories held out (honest); random: snapshots "
+        f"φ = {args.phi}, N = 400, {args.epochs} epochs, batch {args.batch_size} (tuned: their own), 5 "
+        "folds, mean ± std over folds of the test fold.  grouped: whole trajectories held out "
+        "(honest); random: snapshots "
         "(seed paper).  fluct. η_r: correlation of predicted and true deviations of log η_r from the "
         "state-point mean (0 for a model that knows only σ).  Baselines (rheograph.learn.baselines) on the "
         "same folds: stress_mean = training mean at the same (φ, σ); descriptors = gradient-boosted trees "

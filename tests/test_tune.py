@@ -112,3 +112,58 @@ def test_a_trial_whose_process_died_is_failed_and_retried(tmp_path):
     assert [t.state for t in retried] == [optuna.trial.TrialState.COMPLETE]
     assert len(retried) == 1 and retried[0].params["model.lr"] == killed.params["model.lr"]
     assert optuna.trial.TrialState.RUNNING not in states
+
+
+def test_best_experiment_carries_the_tuned_values_and_the_studys_inputs(tmp_path):
+    """The written experiment reproduces the best trial: its sampled values (categorical ones by their
+    original type) and the study's choice of inputs (graph=paper), not the search protocol (fold)."""
+    from rheograph.learn.tune import write_best_experiment
+
+    space = {
+        "model.lr": {"type": "float", "low": 1e-4, "high": 1e-2, "log": True},
+        "model.hidden": {"type": "categorical", "choices": [32, 64]},
+        "model.loss_weights": {"type": "categorical", "choices": [[1.0, 1.0, 1.0], [2.0, 1.0, 1.0]]},
+    }
+    study = optuna.create_study(study_name="paper_phi076")
+    dists = {
+        "model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
+        "model.hidden": optuna.distributions.CategoricalDistribution(["32", "64"]),
+        "model.loss_weights": optuna.distributions.CategoricalDistribution(
+            ["[1.0, 1.0, 1.0]", "[2.0, 1.0, 1.0]"]
+        ),
+    }
+    for value, params in [
+        (0.5, {"model.lr": 1e-3, "model.hidden": "32", "model.loss_weights": "[1.0, 1.0, 1.0]"}),
+        (0.2, {"model.lr": 2e-3, "model.hidden": "64", "model.loss_weights": "[2.0, 1.0, 1.0]"}),
+    ]:
+        study.add_trial(optuna.trial.create_trial(params=params, distributions=dists, value=value))
+    path = write_best_experiment(study, tmp_path / "experiment", ["graph=paper", "fold=0", "~logger"], space)
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(
+            config_name="train",
+            overrides=[f"hydra.searchpath=[file://{tmp_path}]", f"experiment={path.stem}"],
+        )
+        paper = compose(config_name="train", overrides=["graph=paper"])
+    assert cfg.model.lr == 2e-3 and cfg.model.hidden == 64
+    assert list(cfg.model.loss_weights) == [2.0, 1.0, 1.0]
+    assert cfg.graph.edge_features == paper.graph.edge_features  # the inputs it was tuned on
+    assert cfg.fold is None and cfg.get("logger") is not None  # the search protocol is not carried
+
+
+def test_the_defaults_are_queued_once_as_a_trial():
+    """A study over the defaults' neighbourhood shows where the defaults stand: they are queued as one
+    trial (with the values the training config holds), and only once however often the study resumes."""
+    from rheograph.learn.tune import enqueue_defaults
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="tune", overrides=["hparams_search=held_out_phi076"])
+        train = compose(config_name="train")
+        study = optuna.create_study()
+        enqueue_defaults(study, cfg)
+        enqueue_defaults(study, cfg)
+    (queued,) = study.get_trials(deepcopy=False)
+    assert queued.state == optuna.trial.TrialState.WAITING and queued.user_attrs["defaults"]
+    params = queued.system_attrs["fixed_params"]
+    assert params["model.lr"] == train.model.lr and params["model.aggr"] == train.model.aggr
+    assert params["model.loss_weights"] == str(list(train.model.loss_weights))
+    assert set(params) == set(cfg.tune.search_space)

@@ -30,6 +30,10 @@ from rheograph.learn.train import train_folds
 
 log = logging.getLogger("rheograph.tune")
 
+# config groups of conf/train.yaml that describe what is learnt (a study's choice of them belongs in its
+# best experiment; debug, logger and callbacks describe how it runs)
+TRAIN_GROUPS = ("data", "graph", "model", "trainer")
+
 
 def suggest(trial: optuna.Trial, name: str, spec: dict):
     kind = spec["type"]
@@ -153,6 +157,8 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
             n_startup_trials=t.pruner.n_startup_trials, n_warmup_steps=t.pruner.n_warmup_steps
         ),
     )
+    if t.get("enqueue_defaults") and objective is None:
+        enqueue_defaults(study, cfg)
     done = sum(s.state.is_finished() for s in study.trials)
     remaining = max(0, int(t.n_trials) - done)
     log.info("study %s in %s: %d trials finished, %d to run", t.study_name, t.storage, done, remaining)
@@ -167,22 +173,58 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     if any(tr.state == optuna.trial.TrialState.COMPLETE for tr in study.trials):
         space = OmegaConf.to_container(t.search_space, resolve=True)
         path = write_best_experiment(study, Path(t.best_experiment_dir), fixed_overrides(cfg), space)
-        log.info("best trial %d: val/loss = %.4g -> %s", study.best_trial.number, study.best_value, path)
+        log.info("best trial %d: %s = %.4g -> %s", study.best_trial.number, t.metric, study.best_value, path)
     return study
+
+
+def default_params(cfg: DictConfig) -> dict:
+    """The training config's own values (with the study's fixed overrides) of the searched parameters,
+    as Optuna stores them (categorical choices by their string)."""
+    train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
+    params = {}
+    for name, spec in OmegaConf.to_container(cfg.tune.search_space, resolve=True).items():
+        value = OmegaConf.select(train_cfg, name)
+        value = OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
+        if spec["type"] == "categorical":
+            if value not in spec["choices"]:
+                return {}  # the default lies outside the search space: nothing to enqueue
+            value = str(value)
+        elif not spec["low"] <= value <= spec["high"]:
+            return {}
+        params[name] = value
+    return params
+
+
+def enqueue_defaults(study: optuna.Study, cfg: DictConfig) -> None:
+    """Queue the current defaults as a trial (once per study), so that the study shows where they
+    stand among the sampled configurations."""
+    params = default_params(cfg)
+    # a queued trial holds its values as fixed_params until it runs
+    seen = [t.system_attrs.get("fixed_params", t.params) for t in study.get_trials(deepcopy=False)]
+    if params and params not in seen:
+        study.enqueue_trial(params, user_attrs={"defaults": True})
+        log.info("defaults queued as a trial: %s", params)
 
 
 def write_best_experiment(
     study: optuna.Study, directory: Path, base_overrides: list[str], space: dict
 ) -> Path:
-    """``conf/experiment/<study>_best.yaml``: use with ``python train.py experiment=<study>_best``."""
+    """``conf/experiment/<study>_best.yaml``: use with ``python train.py experiment=<study>_best``.
+
+    It holds the best trial's sampled values and the config-group choices among the study's fixed
+    overrides (e.g. ``graph=paper``: the inputs the values were tuned for); the other fixed overrides
+    (folds, epochs, threads: the search's protocol) stay in a comment."""
     directory.mkdir(parents=True, exist_ok=True)
     best = study.best_trial
+    groups = [o.split("=", 1) for o in base_overrides if "=" in o and not o.startswith(("~", "+"))]
+    groups = [(k, v) for k, v in groups if k in TRAIN_GROUPS]
     lines = [
         "# @package _global_",
-        f"# best trial {best.number} of Optuna study '{study.study_name}': mean best val/loss "
-        f"{best.value:.6g}",
+        f"# best trial {best.number} of Optuna study '{study.study_name}': objective {best.value:.6g}",
         f"# fixed overrides of the study: {base_overrides}",
     ]
+    if groups:
+        lines += ["defaults:"] + [f"  - override /{k}: {v}" for k, v in groups]
     nested: dict = {}
     for name, value in best.params.items():
         node = nested
