@@ -55,7 +55,7 @@ def test_assembled_resistance_is_spd_and_matches_dense_pair_sum():
         ref[3 * k + 2, 3 * k + 2] = 4 * s.radii[k] ** 3 / 3
     for q in np.flatnonzero(active):
         idx = np.r_[3 * s.pair_i[q] : 3 * s.pair_i[q] + 3, 3 * s.pair_j[q] : 3 * s.pair_j[q] + 3]
-        ref[np.ix_(idx, idx)] += pair_block(coeff[q], nvec[q, 0], nvec[q, 1])
+        ref[np.ix_(idx, idx)] += pair_block(coeff[q], nvec[q, 0], nvec[q, 1], np.empty((6, 6)))
     np.testing.assert_allclose(dense, ref, atol=1e-9 * np.abs(ref).max())
     assert np.linalg.eigvalsh(dense).min() > 0
 

@@ -87,6 +87,8 @@ def assemble_resistance(
     n = radii.shape[0]
     data = np.zeros(nnz)
     rhs_rate = np.zeros(3 * n)
+    R = np.empty((6, 6))  # scratch block and strain force, reused for every pair
+    g = np.empty(6)
     for j in range(n):
         a = radii[j]
         for q in range(3):
@@ -103,9 +105,9 @@ def assemble_resistance(
         nx = nvec[p, 0]
         ny = nvec[p, 1]
         if in_contact[p]:
-            R = contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p])
+            contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p], R)
         else:
-            R = pair_block(coeff[p], nx, ny)
+            pair_block(coeff[p], nx, ny, R)
         _add_diag_block(data, indptr, diag_slot[i], i, R, 0)
         _add_diag_block(data, indptr, diag_slot[j], j, R, 3)
         for q in range(3):
@@ -121,7 +123,7 @@ def assemble_resistance(
                 else:
                     rhs_rate[3 * j + r - 3] += f
         else:
-            g = strain_force(coeff[p], nx, ny, 0.0, 0.5, 0.0)
+            strain_force(coeff[p], nx, ny, 0.0, 0.5, 0.0, g)
             for r in range(3):
                 rhs_rate[3 * i + r] += g[r]
                 rhs_rate[3 * j + r] += g[3 + r]

@@ -129,11 +129,12 @@ def lubrication_resistance(radii, pair_i, pair_j, xi, active, delta):
 
 
 @njit(cache=True)
-def pair_block(coeff, nx, ny):
-    """Dense symmetric 6x6 resistance block in the order [Ux_i, Uy_i, w_i, Ux_j, Uy_j, w_j]."""
+def pair_block(coeff, nx, ny, R):
+    """Fill ``R`` (6, 6) with the dense symmetric resistance block in the order [Ux_i, Uy_i, w_i, Ux_j,
+    Uy_j, w_j] and return it.  Callers pass one scratch block for all pairs: an allocation per pair
+    cost as much as the arithmetic (docs/benchmarks.md §3)."""
     tx = -ny
     ty = nx
-    R = np.empty((6, 6))
     for a in range(2):
         for b in range(2):
             ia = 3 * a
@@ -157,16 +158,14 @@ def pair_block(coeff, nx, ny):
 
 
 @njit(cache=True)
-def strain_force(coeff, nx, ny, exx, exy, eyy):
-    """Force/torque on (i, j) from the imposed rate of strain E (R_FE : E).
-
-    Returns [Fx_i, Fy_i, T_i, Fx_j, Fy_j, T_j].
+def strain_force(coeff, nx, ny, exx, exy, eyy, out):
+    """Force/torque on (i, j) from the imposed rate of strain E (R_FE : E), written into ``out`` (6,)
+    as [Fx_i, Fy_i, T_i, Fx_j, Fy_j, T_j] and returned.
     """
     tx = -ny
     ty = nx
     nen = nx * (exx * nx + exy * ny) + ny * (exy * nx + eyy * ny)
     ten = tx * (exx * nx + exy * ny) + ty * (exy * nx + eyy * ny)
-    out = np.empty(6)
     gx_i = coeff[XG + 0] + coeff[XG + 2]
     gy_i = 2.0 * (coeff[YG + 0] + coeff[YG + 2])
     gx_j = coeff[XG + 1] + coeff[XG + 3]
@@ -181,20 +180,22 @@ def strain_force(coeff, nx, ny, exx, exy, eyy):
 
 
 @njit(cache=True)
-def contact_block(coeff, nx, ny, ai, aj, k_normal, k_tangential):
-    """Resistance block of a contact: the dashpot (lubrication frozen at contact, in ``coeff``) plus,
-    for the linearly implicit integrator, the spring stiffness times dt (``k_normal``, ``k_tangential``
-    in F_CL / (a gamma0_dot); zero for explicit Euler).
+def contact_block(coeff, nx, ny, ai, aj, k_normal, k_tangential, R):
+    """Fill ``R`` (6, 6) with the resistance block of a contact and return it: the dashpot (lubrication
+    frozen at contact, in ``coeff``) plus, for the linearly implicit integrator, the spring stiffness
+    times dt (``k_normal``, ``k_tangential`` in F_CL / (a gamma0_dot); zero for explicit Euler).
 
     The springs change over a step by dt * K (U_total): normal overlap by -n.(U_j - U_i), tangential
     stretch by the sliding velocity g.U with g = [-t, -a_i, t, -a_j]; the generalised force on the
     pair is -dt K g (g.U), i.e. a symmetric positive semi-definite block k g g^T.
     """
-    R = pair_block(coeff, nx, ny)
+    pair_block(coeff, nx, ny, R)
+    if k_normal == 0.0 and k_tangential == 0.0:  # explicit Euler: the dashpot alone
+        return R
     tx = -ny
     ty = nx
-    gn = np.array([-nx, -ny, 0.0, nx, ny, 0.0])
-    gt = np.array([-tx, -ty, -ai, tx, ty, -aj])
+    gn = (-nx, -ny, 0.0, nx, ny, 0.0)
+    gt = (-tx, -ty, -ai, tx, ty, -aj)
     for r in range(6):
         for q in range(6):
             R[r, q] += k_normal * gn[r] * gn[q] + k_tangential * gt[r] * gt[q]

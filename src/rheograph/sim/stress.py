@@ -89,6 +89,7 @@ def pair_stress_sums(
     ui = np.empty(2)
     uj = np.empty(2)
     vp = np.empty(6)
+    R = np.empty((6, 6))
     for p in range(pair_i.shape[0]):
         i = pair_i[p]
         j = pair_j[p]
@@ -103,7 +104,7 @@ def pair_stress_sums(
                 lub, coeff[p], nx, ny, ui, uj, vel[3 * i + 2], vel[3 * j + 2], 0.0, 0.5 * rate, 0.0, full
             )
         elif in_contact[p]:
-            R = contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p])
+            contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p], R)
             for q in range(3):
                 vp[q] = vel[3 * i + q]
                 vp[3 + q] = vel[3 * j + q]
