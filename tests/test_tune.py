@@ -167,3 +167,33 @@ def test_the_defaults_are_queued_once_as_a_trial():
     assert params["model.lr"] == train.model.lr and params["model.aggr"] == train.model.aggr
     assert params["model.loss_weights"] == str(list(train.model.loss_weights))
     assert set(params) == set(cfg.tune.search_space)
+
+
+def test_epoch_reporter_prunes_by_epoch_and_names_a_metric_that_is_not_logged():
+    """Steps continue over folds (first_step), the fold's best epoch is kept, the pruner's verdict ends
+    the trial, and a misspelt tune.metric is one clear error, not a silent objective of inf."""
+    from types import SimpleNamespace
+
+    import torch
+
+    from rheograph.errors import InputError
+    from rheograph.learn.tune import EpochReporter
+
+    study = optuna.create_study(pruner=optuna.pruners.ThresholdPruner(upper=1.0))
+    trial = study.ask()
+    reporter = EpochReporter(trial, "val/target_loss", first_step=30)
+    for epoch, value in enumerate([0.5, 0.3, 0.4]):
+        trainer = SimpleNamespace(
+            sanity_checking=False,
+            current_epoch=epoch,
+            callback_metrics={"val/target_loss": torch.tensor(value)},
+        )
+        reporter.on_validation_epoch_end(trainer, None)
+    assert reporter.best == pytest.approx(0.3)
+    assert sorted(trial.storage.get_trial(trial._trial_id).intermediate_values) == [30, 31, 32]
+    trainer.callback_metrics["val/target_loss"] = torch.tensor(2.0)  # above the threshold: pruned
+    trainer.current_epoch = 3
+    with pytest.raises(optuna.TrialPruned):
+        reporter.on_validation_epoch_end(trainer, None)
+    with pytest.raises(InputError, match="tune.metric='val/typo'"):
+        EpochReporter(trial, "val/typo", 0).on_validation_epoch_end(trainer, None)
