@@ -5,7 +5,10 @@ under docs/results/surrogate_per_phi/N<N>_phi<φ>/; the table replaces the ``sur
 docs/benchmarks.md and the figure is docs/figures/surrogate_r2_vs_phi.png.
 
     OMP_WAIT_POLICY=PASSIVE python bench/surrogate_per_phi.py --n 400 --phi 0.70 0.72 0.74 0.76 \\
-        [--split grouped] [--epochs 60] [extra train.py overrides after --]
+        [--split grouped random] [--epochs 60] [extra train.py overrides after --]
+
+Both protocols in one table: ``grouped`` (whole trajectories held out: the estimate that counts) and
+``random`` (snapshots, the seed paper's protocol; run directories ``..._random``).
 
 (φ, N) pairs without data in data/paper/index.json are skipped and said so.
 """
@@ -43,7 +46,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[400])
     ap.add_argument("--phi", type=float, nargs="+", default=[0.70, 0.72, 0.74, 0.76, 0.78, 0.80])
-    ap.add_argument("--split", default="grouped", choices=["grouped", "random"])
+    ap.add_argument("--split", nargs="+", default=["grouped"], choices=["grouped", "random"])
     ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--index", default="data/paper/index.json")
     ap.add_argument("--fold-workers", type=int, default=1, help="parallel fold processes (one per core)")
@@ -62,32 +65,31 @@ def main(argv=None) -> None:
         (e["params"]["n_particles"], round(e["params"]["phi"], 4)) for e in runs if e["status"] != "running"
     }
     results = {}
-    for n in args.n:
-        for phi in args.phi:
-            if (n, round(phi, 4)) not in available:
-                print(f"N = {n}, φ = {phi}: no finished runs in {args.index}: skipped")
-                continue
-            cfg = benchmark_config(
-                args.index, phi, n, args.split, args.epochs, args.fold_workers, extra=args.overrides
-            )
-            run_dir = Path(args.out) / f"N{n}_phi{phi:g}"
-            stamp = run_dir / "train_minutes.txt"  # wall minutes of the invocation that trained the folds
-            finished = (run_dir / "metrics.json").exists() and stamp.exists()
-            stale = finished and (run_dir / "config_fingerprint.txt").read_text().strip() != (
-                config_fingerprint(cfg)
-            )
-            if not (stale and args.keep_earlier):
-                t0 = time.perf_counter()
-                train_or_resume(cfg, run_dir)
-                if not finished or stale:
-                    stamp.write_text(f"{(time.perf_counter() - t0) / 60:.2f}\n")
-                stale = False
-            minutes = float(stamp.read_text())
-            for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:
-                shutil.rmtree(big, ignore_errors=True)
-            folds = json.loads((run_dir / "metrics.json").read_text())["folds"]
-            results[(n, phi)] = (folds, minutes, stale)
-            print(n, phi, {k: np.mean([f[f"test/{k}"] for f in folds]) for k, _ in TARGETS}, flush=True)
+    for split, n, phi in ((s, n, phi) for s in args.split for n in args.n for phi in args.phi):
+        if (n, round(phi, 4)) not in available:
+            print(f"N = {n}, φ = {phi}: no finished runs in {args.index}: skipped")
+            continue
+        cfg = benchmark_config(
+            args.index, phi, n, split, args.epochs, args.fold_workers, extra=args.overrides
+        )
+        run_dir = Path(args.out) / (f"N{n}_phi{phi:g}" + ("" if split == "grouped" else f"_{split}"))
+        stamp = run_dir / "train_minutes.txt"  # wall minutes of the invocation that trained the folds
+        finished = (run_dir / "metrics.json").exists() and stamp.exists()
+        stale = finished and (run_dir / "config_fingerprint.txt").read_text().strip() != (
+            config_fingerprint(cfg)
+        )
+        if not (stale and args.keep_earlier):
+            t0 = time.perf_counter()
+            train_or_resume(cfg, run_dir)
+            if not finished or stale:
+                stamp.write_text(f"{(time.perf_counter() - t0) / 60:.2f}\n")
+            stale = False
+        minutes = float(stamp.read_text())
+        for big in list(run_dir.glob("fold*/")) + [run_dir / "tensorboard"]:
+            shutil.rmtree(big, ignore_errors=True)
+        folds = json.loads((run_dir / "metrics.json").read_text())["folds"]
+        results[(split, n, phi)] = (folds, minutes, stale)
+        print(split, n, phi, {k: np.mean([f[f"test/{k}"] for f in folds]) for k, _ in TARGETS}, flush=True)
     if not results:
         raise SystemExit("no (φ, N) with data")
     write(results, args)
@@ -103,30 +105,40 @@ def write(results: dict, args) -> None:
         v = np.array([f[key] for f in folds], dtype=np.float64)
         return np.nanmean(v), np.nanstd(v, ddof=1)
 
-    protocol = "whole trajectories held out" if args.split == "grouped" else "random snapshots"
     lines = [
-        f"{args.split} split ({protocol}), "
-        f"5 folds, {args.epochs} epochs, batch 32 (N = 400) / 8 (N = 2000), default model "
-        "(graph=physics, model=resgcn_physics"
+        "5 folds, "
+        f"{args.epochs} epochs, batch 32 (N = 400) / 8 (N = 2000), default model (graph=physics, "
+        "model=resgcn_physics"
         + (", " + " ".join(args.overrides) if args.overrides else "")
-        + "); mean ± std over test folds.  Baseline: gradient-boosted trees on physics descriptors + log σ, "
-        "same folds.  Paper: the seed paper's reported values (random split).",
+        + "); mean ± std over test folds.  Split: grouped = whole trajectories held out (the estimate "
+        "that counts), random = snapshots (the seed paper's protocol).  Baseline: gradient-boosted trees "
+        "on physics descriptors + log σ, same folds.  Paper: the seed paper's reported values (random "
+        "split).",
         "",
-        "| N | φ | R² log η_r | R² log Π | R² Z_μ | trees: log η_r / log Π / Z_μ | paper | train min |",
-        "|---|---|---|---|---|---|---|---|",
+        "| split | N | φ | R² log η_r | R² log Π | R² Z_μ | trees: log η_r / log Π / Z_μ | paper "
+        "| train min |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
-    for n in sorted({n for n, _ in results}):
-        phis = sorted(phi for m, phi in results if m == n)
+    for split, n in sorted({(s, n) for s, n, _ in results}):
+        phis = sorted(phi for s, m, phi in results if (s, m) == (split, n))
+        style = "-" if split == "grouped" else "--"
         for k, (key, _) in enumerate(TARGETS):
-            mean_std = np.array([stats(results[(n, phi)][0], f"test/{key}") for phi in phis])
+            mean_std = np.array([stats(results[(split, n, phi)][0], f"test/{key}") for phi in phis])
             axes[k].errorbar(
-                phis, mean_std[:, 0], yerr=mean_std[:, 1], marker="o", capsize=3, label=f"N = {n}"
+                phis,
+                mean_std[:, 0],
+                yerr=mean_std[:, 1],
+                marker="o",
+                ls=style,
+                capsize=3,
+                label=f"N = {n}, {split}",
             )
-            base = [stats(results[(n, phi)][0], f"baseline/descriptors/{key}")[0] for phi in phis]
-            axes[k].plot(phis, base, "k:", marker="x", label=f"trees, N = {n}" if k == 0 else None)
+            if split == "grouped":
+                base = [stats(results[(split, n, phi)][0], f"baseline/descriptors/{key}")[0] for phi in phis]
+                axes[k].plot(phis, base, "k:", marker="x", label=f"trees, N = {n}" if k == 0 else None)
         for phi in phis:
-            folds, minutes, stale = results[(n, phi)]
+            folds, minutes, stale = results[(split, n, phi)]
             cells = [f"{m:.3f} ± {s:.3f}" for m, s in (stats(folds, f"test/{key}") for key, _ in TARGETS)]
             trees = " / ".join(f"{stats(folds, f'baseline/descriptors/{key}')[0]:.3f}" for key, _ in TARGETS)
             paper = PAPER.get(round(phi, 2))
@@ -134,7 +146,7 @@ def write(results: dict, args) -> None:
                 " / ".join(f"{v:.2f}" for v in paper) if paper else ("≳ 0.99" if phi <= 0.76 else "–")
             )
             lines.append(
-                f"| {n} | {phi:.2f}{' †' if stale else ''} | "
+                f"| {split} | {n} | {phi:.2f}{' †' if stale else ''} | "
                 + " | ".join(cells)
                 + f" | {trees} | {paper_cell} | {minutes:.1f} |"
             )
@@ -162,10 +174,10 @@ def write(results: dict, args) -> None:
         "",
         "Per-(φ, N) reports (parity, flow curves, MAE distributions): docs/results/surrogate_per_phi/.  "
         "Command: `python bench/surrogate_per_phi.py --n "
-        + " ".join(str(n) for n in sorted({n for n, _ in results}))
+        + " ".join(str(n) for n in sorted({n for _, n, _ in results}))
         + " --phi "
-        + " ".join(f"{p:g}" for p in sorted({p for _, p in results}))
-        + f" --split {args.split} --epochs {args.epochs}"
+        + " ".join(f"{p:g}" for p in sorted({p for _, _, p in results}))
+        + f" --split {' '.join(args.split)} --epochs {args.epochs}"
         + (" -- " + " ".join(args.overrides) if args.overrides else "")
         + "`",
     ]
