@@ -187,9 +187,11 @@ def default_params(cfg: DictConfig) -> dict:
         value = OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
         if spec["type"] == "categorical":
             if value not in spec["choices"]:
-                return {}  # the default lies outside the search space: nothing to enqueue
+                log.info("default %s = %s is not among the choices: defaults not queued", name, value)
+                return {}
             value = str(value)
         elif not spec["low"] <= value <= spec["high"]:
+            log.info("default %s = %s is outside the range: defaults not queued", name, value)
             return {}
         params[name] = value
     return params
