@@ -87,3 +87,18 @@ def test_each_complete_area_fraction_has_the_papers_snapshot_count(index):
                     counts += int((h5["snapshots/strain"][()] >= 1.0).sum())
         assert counts >= 380, (phi, counts)
     assert json.loads(INDEX.read_text())["format"] == "rheograph-index-1"
+
+
+def test_jamming_onset_per_seed_names_what_is_still_open():
+    """The card's onset per seed: the smallest jammed stress, or 'none up to' the largest completed one
+    of *that seed*; an unfinished run below the onset is named instead of being read as flowing."""
+    from rheograph.dataset_card import jamming_onset
+
+    def runs(**status):
+        return [{"stress": float(k[1:].replace("_", ".")), "status": v} for k, v in status.items()]
+
+    assert jamming_onset(runs(s10="completed", s20="jammed", s50="jammed")) == "20"
+    assert jamming_onset(runs(s10="completed", s20="completed")) == "none up to 20"
+    assert jamming_onset(runs(s20="completed", s50="interrupted")) == "none up to 20 (50 unfinished)"
+    assert jamming_onset(runs(s14="running", s20="jammed", s100="running")) == "20 (14 unfinished)"
+    assert jamming_onset(runs(s0_5="interrupted")) == "none up to 0 (0.5 unfinished)"

@@ -107,6 +107,20 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
     return records
 
 
+def jamming_onset(runs: list[dict]) -> str:
+    """The smallest σ/σ0 at which one seed's runs (records with ``stress`` and ``status``) shear-jammed,
+    or ``none up to`` the largest that completed; unfinished runs below the onset leave it open and
+    are named."""
+    jammed = sorted(r["stress"] for r in runs if r["status"] == "jammed")
+    flowed = [r["stress"] for r in runs if r["status"] == "completed"]
+    limit = jammed[0] if jammed else np.inf
+    open_runs = sorted(
+        r["stress"] for r in runs if r["status"] not in ("jammed", "completed") and r["stress"] < limit
+    )
+    pending = f" ({', '.join(f'{x:g}' for x in open_runs)} unfinished)" if open_runs else ""
+    return f"{jammed[0]:g}{pending}" if jammed else f"none up to {max(flowed, default=0):g}{pending}"
+
+
 def _median(values) -> str:
     v = np.array([x for x in values if np.isfinite(x)])
     return f"{np.median(v):.3f} ({v.min():.3f}–{v.max():.3f})" if v.size else "–"
@@ -214,12 +228,8 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
     jam_lines = []
     for (n, phi), runs in sorted(by_phi_n.items()):
         for seed in sorted({r["seed"] for r in runs}):
-            jammed = sorted(r["stress"] for r in runs if r["seed"] == seed and r["status"] == "jammed")
-            jam_lines.append(
-                f"| {n} | {phi:.2f} | {seed} | {jammed[0]:g} |"
-                if jammed
-                else f"| {n} | {phi:.2f} | {seed} | none up to {max(r['stress'] for r in runs):g} |"
-            )
+            onset = jamming_onset([r for r in runs if r["seed"] == seed])
+            jam_lines.append(f"| {n} | {phi:.2f} | {seed} | {onset} |")
     lines += [
         "",
         "## Shear jamming: smallest jammed σ/σ0 per seed",
