@@ -124,7 +124,7 @@ def test_best_experiment_carries_the_tuned_values_and_the_studys_inputs(tmp_path
         "model.hidden": {"type": "categorical", "choices": [32, 64]},
         "model.loss_weights": {"type": "categorical", "choices": [[1.0, 1.0, 1.0], [2.0, 1.0, 1.0]]},
     }
-    study = optuna.create_study(study_name="paper_phi076")
+    study = optuna.create_study(study_name="unit_test_search")  # no such experiment in conf/
     dists = {
         "model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
         "model.hidden": optuna.distributions.CategoricalDistribution(["32", "64"]),
