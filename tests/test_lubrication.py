@@ -144,3 +144,8 @@ def test_contact_block_adds_positive_stiffness():
     np.testing.assert_allclose(diff, diff.T, atol=1e-12)
     eig = np.linalg.eigvalsh(diff)
     assert eig.min() > -1e-12 and np.sum(eig > 1e-9) == 2  # one normal and one tangential mode
+    # explicit Euler (no implicit springs) is the dashpot alone, bit for bit, and a reused scratch block
+    # is fully overwritten (no value of the previous pair leaks into the next)
+    scratch = np.full((6, 6), np.nan)
+    np.testing.assert_array_equal(contact_block(coeff, nx, ny, 1.0, 1.4, 0.0, 0.0, scratch), base)
+    np.testing.assert_array_equal(pair_block(coeff, nx, ny, stiff), base)
