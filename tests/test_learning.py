@@ -2,6 +2,7 @@
 
 Data come from the simulator itself (tiny runs), never from hand-made physics."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -163,8 +164,8 @@ def test_datamodule_splits_and_scaling(tiny_files, tmp_path, split):
         assert not (parts[0] & parts[1] or parts[0] & parts[2] or parts[1] & parts[2])
         assert set().union(*parts) == set(range(len(dm.dataset)))
         seen.append(set(dm.test_idx))
-        y = dm.dataset.y[torch.as_tensor(dm.train_idx)]
-        torch.testing.assert_close(dm.target_mean, y.mean(0))  # fitted on the training part only
+        edges = torch.cat([dm.dataset[int(i)].edge_attr for i in dm.train_idx]).double()
+        torch.testing.assert_close(dm.edge_mean, edges.mean(0).float())  # fitted on the training part only
         if split == "grouped":
             runs = dm.dataset.run_id.numpy()
             assert not set(runs[dm.train_idx]) & set(runs[dm.test_idx])
@@ -257,6 +258,9 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             "model.hidden=32",
             "model.lr=2e-3",
             "model.dropout=0.0",
+            # Pi in sigma0: its spread over the three stresses is the learnable signal asserted below
+            # (Pi / sigma of N = 64 snapshots is mostly noise)
+            "graph.pressure_per_stress=false",
         ]
     )
     run_dir = tmp_path / "run"
@@ -488,3 +492,45 @@ def test_descriptors_count_the_simulators_contacts_and_sum_the_features(tiny_fil
             assert d[0] == pytest.approx(sn["z"][k])
             npair = pairs["i"].size
             assert d[2] == pytest.approx(feats["contact_shear"][:npair].sum() / (lx * ly))
+
+
+def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_files, tmp_path):
+    """``graph.pressure_per_stress``: the network's Pi target is Pi/sigma; predictions come back in sigma0.
+    A network that outputs the training mean then predicts Pi proportional to sigma (the frictional
+    plateau's scaling), and the standardised Pi target no longer spans the decades of sigma."""
+    from rheograph.errors import InputError
+    from rheograph.learn.module import SurrogateModule, pressure_in_sigma0, pressure_in_stress_units
+
+    y = torch.tensor([[1.0, -3.0, 0.0], [2.0, 0.0, 1.0], [3.0, 9.5, 2.0]], dtype=torch.float64)
+    stress = torch.tensor([0.5, 5.0, 200.0], dtype=torch.float64)
+    torch.testing.assert_close(pressure_in_sigma0(pressure_in_stress_units(y, stress), stress), y)
+    per_sigma = pressure_in_stress_units(y, stress)
+    torch.testing.assert_close(per_sigma[:, [0, 2]], y[:, [0, 2]])  # eta_r and Z_mu untouched
+    # asinh(Pi/s) -> asinh(Pi/(s sigma)): Pi/(s sigma) = sinh(y)/sigma
+    torch.testing.assert_close(torch.sinh(per_sigma[:, 1]), torch.sinh(y[:, 1]) / stress)
+
+    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=("log_stress",))
+    graphs = [g for path in tiny_files for g in snapshot_graphs(path, settings, 0)]
+    batch = Batch.from_data_list(graphs)
+    spread = {}
+    for per_stress in (False, True):
+        module = SurrogateModule(edge_in=6, global_in=1, pressure_per_stress=per_stress).eval()
+        module.fit_target_scaling(batch.y, batch.stress)
+        spread[per_stress] = float(module.target_std[1])
+        module._net = lambda b: torch.zeros(b.num_graphs, 3)  # the standardised mean
+        pressure = inverse_transform(module(batch)[:, 1].double().numpy(), settings.pressure_scale)
+        ratio = pressure / batch.stress.numpy()
+        assert (np.ptp(ratio) < 1e-4 * ratio.mean()) == per_stress
+    # 0.5 to 50 sigma0: Pi spans two decades in sigma0, Pi/sigma a factor of a few
+    assert spread[True] < 0.5 * spread[False]
+    # sigma must be an input of the model that uses it
+    with pytest.raises(InputError, match="log_stress"):
+        GraphSettings(pressure_per_stress=True)
+    # the graphs do not depend on how the model reads Pi: one cache
+    caches = [
+        SnapshotGraphDataset(
+            tiny_files[:1], dataclasses.replace(settings, pressure_per_stress=flag), tmp_path
+        )
+        for flag in (False, True)
+    ]
+    assert caches[0].digest == caches[1].digest

@@ -42,6 +42,8 @@ class GraphSettings:
     min_strain: float = 1.0  # snapshots before this strain (start-up transient) are skipped
     viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
     pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
+    # the model learns Pi in units of the imposed stress (SurrogateModule): needs log_stress as an input
+    pressure_per_stress: bool = False
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -60,6 +62,11 @@ class GraphSettings:
         for name in ("viscosity_scale", "pressure_scale"):
             if getattr(self, name) <= 0:
                 raise InputError(f"graph.{name} must be > 0")
+        if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
+            raise InputError(
+                "graph.pressure_per_stress=true learns Pi in units of the imposed stress, which the model "
+                f"must then be given: add log_stress to graph.graph_inputs (now {list(self.graph_inputs)})"
+            )
 
     def transform_targets(self, eta, pressure, z_mu) -> np.ndarray:
         return np.stack(
@@ -152,7 +159,8 @@ class SnapshotGraphDataset(InMemoryDataset):
         self.settings = settings
         key = json.dumps(
             {
-                "settings": asdict(settings),
+                # pressure_per_stress only says how the model reads the targets: same graphs
+                "settings": {k: v for k, v in asdict(settings).items() if k != "pressure_per_stress"},
                 "files": _files_fingerprint(self.files),
                 "schema": SCHEMA_VERSION,
                 "version": 3,  # 3: jammed per snapshot (after the flow stopped), kept at any strain

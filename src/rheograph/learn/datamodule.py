@@ -158,9 +158,6 @@ class SnapshotDataModule(L.LightningDataModule):
             self.test_idx = index[folds == self.fold]
             self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
             self.train_idx = index[(folds != self.fold) & (folds != (self.fold + 1) % self.num_folds)]
-        y = dataset.y[torch.as_tensor(self.train_idx)]
-        self.target_mean = y.mean(dim=0)
-        self.target_std = y.std(dim=0).clamp_min(1e-6)
         # edge-feature standardisation, fitted on the training graphs only (binary and constant
         # features get std 1 where they do not vary)
         edges = torch.cat([dataset[int(i)].edge_attr for i in self.train_idx]).double()

@@ -104,9 +104,11 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         global_in=len(settings.graph_inputs),
         viscosity_scale=settings.viscosity_scale,
         pressure_scale=settings.pressure_scale,
+        pressure_per_stress=settings.pressure_per_stress,
         _convert_="all",
     )
-    module.set_target_scaling(dm.target_mean, dm.target_std)
+    train = torch.as_tensor(dm.train_idx)
+    module.fit_target_scaling(dm.dataset.y[train], dm.dataset.stress[train])
     module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
     return dm, module
 
