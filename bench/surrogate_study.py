@@ -11,6 +11,8 @@ features, softmax aggregation, mean pooling, positions only); ``physics_position
 features, positions only; ``physics`` = physics-aware features + imposed stress (graph input and CLM
 load); ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
 stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation;
+``physics_pi_sigma0`` = ``physics`` learning Pi in sigma0 (graph.pressure_per_stress=false) with the
+weights that suited it (2/5/2): ablation of learning Pi in units of the imposed stress;
 ``<inputs>_tuned`` = the best trial of that input variant's Optuna study
 (``conf/experiment/<inputs>_phi076_best.yaml``, its own batch size).  Every run trains the K folds with
 the same epochs and seed.
@@ -39,8 +41,18 @@ VARIANTS = {
     "physics": ["graph=physics", "model=resgcn_physics"],
     "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
     "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
+    "physics_pi_sigma0": [
+        "graph=physics",
+        "model=resgcn_physics",
+        "graph.pressure_per_stress=false",
+        "model.loss_weights=[2.0,5.0,2.0]",
+    ],
     # the best trial of each input variant's Optuna study (bench/tune_report.py), with its batch size
-    **{f"{v}_tuned": [f"experiment={v}_phi076_best"] for v in ("physics", "paper", "physics_positions")},
+    **{
+        f"{v}_tuned": [f"experiment={v}_phi076_best"]
+        for v in ("physics", "paper", "physics_positions")
+        if (ROOT / "conf" / "experiment" / f"{v}_phi076_best.yaml").exists()  # once its study has run
+    },
 }
 COLUMNS = [
     ("r2_log_eta", "R² log η_r"),

@@ -97,3 +97,19 @@ def test_leave_one_phi_out_has_one_fold_per_committed_area_fraction():
         if e["params"]["n_particles"] == cfg.data.n_particles and e["status"] != "running"
     }
     assert cfg.data.num_folds == len(phis), sorted(phis)
+
+
+def test_every_surrogate_study_variant_composes_valid_graph_settings():
+    """The study's variants are override lists: each must compose and give graph settings the dataset
+    accepts (e.g. Pi in units of sigma only where sigma is an input), with Pi in sigma0 for the
+    positions-only variants."""
+    from conftest import load_bench_script
+
+    from rheograph.learn.train import graph_settings
+
+    study = load_bench_script("surrogate_study")
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        for name, overrides in study.VARIANTS.items():
+            settings = graph_settings(compose(config_name="train", overrides=overrides))
+            knows_stress = "log_stress" in settings.graph_inputs
+            assert settings.pressure_per_stress == (knows_stress and name != "physics_pi_sigma0"), name
