@@ -139,8 +139,8 @@ def write(results: dict, args) -> None:
                 axes[k].plot(phis, base, "k:", marker="x", label=f"trees, N = {n}" if k == 0 else None)
         for phi in phis:
             folds, minutes, stale = results[(split, n, phi)]
-            cells = [f"{m:.3f} ± {s:.3f}" for m, s in (stats(folds, f"test/{key}") for key, _ in TARGETS)]
-            trees = " / ".join(f"{stats(folds, f'baseline/descriptors/{key}')[0]:.3f}" for key, _ in TARGETS)
+            cells = [f"{m:.4f} ± {s:.4f}" for m, s in (stats(folds, f"test/{key}") for key, _ in TARGETS)]
+            trees = " / ".join(f"{stats(folds, f'baseline/descriptors/{key}')[0]:.4f}" for key, _ in TARGETS)
             paper = PAPER.get(round(phi, 2))
             paper_cell = (
                 " / ".join(f"{v:.2f}" for v in paper) if paper else ("≳ 0.99" if phi <= 0.76 else "–")
