@@ -203,12 +203,16 @@ class SurrogateModule(L.LightningModule):
     def _net(self, batch) -> torch.Tensor:
         return self.net(batch.x, batch.edge_index, batch.edge_attr, batch.batch, batch.u, batch.area)
 
-    def forward(self, batch) -> torch.Tensor:
-        """Predicted transformed targets (G, 3) (not standardised; Pi in sigma0)."""
-        learned = self._net(batch) * self.target_std + self.target_mean
+    def _transformed(self, z: torch.Tensor, batch) -> torch.Tensor:
+        """Standardised network output (G, 3) -> transformed targets (Pi in sigma0)."""
+        learned = z * self.target_std + self.target_mean
         if self.hparams.pressure_per_stress:
             return pressure_in_sigma0(learned, batch.stress.view(-1))
         return learned
+
+    def forward(self, batch) -> torch.Tensor:
+        """Predicted transformed targets (G, 3) (not standardised; Pi in sigma0)."""
+        return self._transformed(self._net(batch), batch)
 
     def _step(self, batch, stage: str):
         z = self._net(batch)
@@ -232,9 +236,7 @@ class SurrogateModule(L.LightningModule):
         self.log(f"{stage}/target_loss", per_target.sum(), batch_size=size, on_epoch=True, on_step=False)
         for k, name in enumerate(TARGET_NAMES):
             self.log(f"{stage}/loss_{name}", per_target[k], batch_size=size, on_epoch=True, on_step=False)
-        pred = z.detach() * self.target_std + self.target_mean
-        if self.hparams.pressure_per_stress:
-            pred = pressure_in_sigma0(pred, batch.stress.view(-1))
+        pred = self._transformed(z.detach(), batch)
         self._outputs[stage].append((pred.cpu().numpy(), batch.y.cpu().numpy()))
         return loss
 
