@@ -534,3 +534,34 @@ def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_f
         for flag in (False, True)
     ]
     assert caches[0].digest == caches[1].digest
+
+
+def test_per_phi_scores_split_a_pooled_models_predictions_by_area_fraction():
+    """A pooled model's report scores each phi on its own graphs: exact predictions at one phi give
+    R² 1 there whatever the other phi's errors, and jammed graphs never enter the viscosity score."""
+    from rheograph.learn.report import per_phi_scores
+
+    rng = np.random.default_rng(0)
+
+    def fold(k):
+        phi = np.repeat([0.70, 0.76], 40)
+        stress = np.tile(np.repeat([1.0, 10.0], 20), 2)
+        true = np.stack(
+            [10 * stress * rng.uniform(1, 2, 80), stress * rng.uniform(0.5, 1, 80), rng.uniform(0, 2, 80)], 1
+        )
+        pred = true.copy()
+        pred[40:] *= rng.uniform(0.8, 1.2, (40, 3))  # errors at phi = 0.76 only
+        jammed = np.zeros(80, dtype=bool)
+        jammed[:5] = True
+        pred[:5, 0] = 1e9  # a jammed graph's viscosity prediction: must not be scored
+        return dict(
+            fold=k, pred=pred, true=true, phi=phi, stress=stress, jammed=jammed, baselines={"x": true}
+        )
+
+    scores = per_phi_scores([fold(0), fold(1)])
+    assert set(scores) == {0.70, 0.76}
+    for key in ("r2_log_eta", "r2_log_pressure", "r2_z_mu"):
+        np.testing.assert_allclose(scores[0.70][key], 1.0)
+        assert np.all(scores[0.76][key] < 0.999)
+    assert np.all(scores[0.70]["n_jammed"] == 5) and np.all(scores[0.76]["n_jammed"] == 0)
+    np.testing.assert_allclose(per_phi_scores([fold(0)], model="x")[0.76]["r2_z_mu"], 1.0)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.learn.module import TARGET_NAMES
+from rheograph.learn.module import TARGET_NAMES, fold_metrics
 
 LABELS = {"eta": "η_r", "pressure": "Π / σ0", "z_mu": "Z_μ"}
 BASELINE_LABELS = {
@@ -15,6 +15,71 @@ BASELINE_LABELS = {
     "descriptors": "baseline: descriptors + σ (trees)",
     "descriptors_ridge": "baseline: descriptors, positions only (ridge)",
 }
+
+
+def per_phi_scores(predictions: list[dict], model: str | None = None) -> dict[float, dict[str, np.ndarray]]:
+    """Test scores of a model trained over several area fractions, broken down per area fraction.
+
+    ``predictions``: the per-fold test predictions (``pred``, ``true`` (G, 3) physical units, ``phi``,
+    ``stress``, ``jammed`` (G,)); ``model``: None for the graph network, else a baseline name.  Returns
+    {phi: {metric: (n_folds,) values}}, the ``fold_metrics`` of each fold's test graphs at that phi (NaN
+    where a fold has fewer than 2 graphs there), so that a pooled model is compared with one model per
+    phi on the same footing.
+    """
+    phis = np.unique(np.round(np.concatenate([p["phi"] for p in predictions]), 6))
+    out: dict[float, dict[str, list]] = {float(v): {} for v in phis}
+    for p in predictions:
+        pred = p["pred"] if model is None else p["baselines"][model]
+        for value in phis:
+            sel = np.isclose(p["phi"], value)
+            rows = (
+                fold_metrics(pred[sel], p["true"][sel], p["stress"][sel], p["jammed"][sel])
+                if sel.sum() > 1
+                else {}
+            )
+            for key in set(rows) | set(out[float(value)]):
+                out[float(value)].setdefault(key, []).append(rows.get(key, np.nan))
+    return {phi: {k: np.asarray(v, dtype=np.float64) for k, v in m.items()} for phi, m in out.items()}
+
+
+def _per_phi_table(predictions: list[dict]) -> list[str]:
+    """Markdown rows: per area fraction, the network's R² (mean ± std over folds) beside the trees'."""
+    net = per_phi_scores(predictions)
+    trees = (
+        per_phi_scores(predictions, "descriptors")
+        if "descriptors" in predictions[0].get("baselines", {})
+        else {}
+    )
+    lines = [
+        "## Per area fraction",
+        "",
+        "Test graphs of each φ, scored per fold (mean ± std over folds); trees: the descriptor baseline "
+        "on the same graphs.",
+        "",
+        "| φ | test graphs | R² log η_r | R² log Π | R² Z_μ | fluct. η_r | trees: log η_r / log Π / Z_μ |",
+        "|---|---|---|---|---|---|---|",
+    ]
+
+    def ms(values):
+        finite = values[np.isfinite(values)]
+        if finite.size == 0:
+            return "n/a"
+        return f"{finite.mean():.4f} ± {finite.std(ddof=1) if finite.size > 1 else 0.0:.4f}"
+
+    for phi, m in net.items():
+        n = sum(int(np.isclose(p["phi"], phi).sum()) for p in predictions)
+        tree = (
+            " / ".join(
+                f"{np.nanmean(trees[phi][f'r2_{k}']):.4f}" for k in ("log_eta", "log_pressure", "z_mu")
+            )
+            if trees
+            else "–"
+        )
+        lines.append(
+            f"| {phi:.2f} | {n} | {ms(m['r2_log_eta'])} | {ms(m['r2_log_pressure'])} | {ms(m['r2_z_mu'])} "
+            f"| {np.nanmean(m['fluct_eta']):.2f} | {tree} |"
+        )
+    return lines + [""]
 
 
 def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict], split: str) -> Path:
@@ -91,6 +156,8 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
             f"nearest state point jammed): right on {right:.0f} of {runs} test trajectories ({jammed} of "
             "them jammed); η_r is not scored on jammed snapshots.",
         ]
+    if split != "phi" and np.unique(np.concatenate([p["phi"] for p in predictions])).size > 1:
+        lines += [""] + _per_phi_table(predictions)
     lines += [
         "",
         "## Graph network per fold",
