@@ -79,7 +79,7 @@ def _per_phi_table(predictions: list[dict]) -> list[str]:
             f"| {phi:.2f} | {n} | {ms(m['r2_log_eta'])} | {ms(m['r2_log_pressure'])} | {ms(m['r2_z_mu'])} "
             f"| {np.nanmean(m['fluct_eta']):.2f} | {tree} |"
         )
-    return lines + [""]
+    return lines
 
 
 def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict], split: str) -> Path:
