@@ -58,6 +58,11 @@ def main(argv=None) -> None:
         help="report a (φ, N) whose 5 folds an earlier version of this command finished, even if the "
         "configuration changed since (marked †), instead of retraining it",
     )
+    ap.add_argument(
+        "--report-only",
+        action="store_true",
+        help="train nothing: re-render the table from the (split, N, φ) runs already finished (others skipped)",
+    )
     ap.add_argument("overrides", nargs="*", help="extra train.py overrides (after --)")
     args = ap.parse_args(argv)
     runs = read_index(ROOT / args.index)["runs"]
@@ -75,10 +80,13 @@ def main(argv=None) -> None:
         run_dir = Path(args.out) / (f"N{n}_phi{phi:g}" + ("" if split == "grouped" else f"_{split}"))
         stamp = run_dir / "train_minutes.txt"  # wall minutes of the invocation that trained the folds
         finished = (run_dir / "metrics.json").exists() and stamp.exists()
+        if args.report_only and not finished:
+            print(f"{split}, N = {n}, φ = {phi}: not trained yet (--report-only): skipped")
+            continue
         stale = finished and (run_dir / "config_fingerprint.txt").read_text().strip() != (
             config_fingerprint(cfg)
         )
-        if not (stale and args.keep_earlier):
+        if not (stale and (args.keep_earlier or args.report_only)):
             t0 = time.perf_counter()
             train_or_resume(cfg, run_dir)
             if not finished or stale:
