@@ -61,7 +61,7 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--report-only",
         action="store_true",
-        help="train nothing: re-render the table from the (split, N, φ) runs already finished (others skipped)",
+        help="train nothing: re-render the table from the finished (split, N, φ) runs (others skipped)",
     )
     ap.add_argument("overrides", nargs="*", help="extra train.py overrides (after --)")
     args = ap.parse_args(argv)
