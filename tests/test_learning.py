@@ -17,7 +17,7 @@ from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset, snapsh
 from rheograph.graphs.features import forward_transform, inverse_transform, snapshot_edges
 from rheograph.learn.datamodule import SnapshotDataModule, kfold_assignment
 from rheograph.learn.model import ResGCN
-from rheograph.sim.geometry import minimum_image
+from rheograph.sim.geometry import minimum_image, pair_geometry
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -565,3 +565,82 @@ def test_per_phi_scores_split_a_pooled_models_predictions_by_area_fraction():
         assert np.all(scores[0.76][key] < 0.999)
     assert np.all(scores[0.70]["n_jammed"] == 5) and np.all(scores[0.76]["n_jammed"] == 0)
     np.testing.assert_allclose(per_phi_scores([fold(0)], model="x")[0.76]["r2_z_mu"], 1.0)
+
+
+def test_history_features_reproduce_the_simulators_spring_shear_stress():
+    """The spring stress of the simulator, sigma_xy = (6 pi / A) sigma sum (spring_shear - contact_shear)
+    over touching pairs, is recovered from positions plus the recorded contact states (stretch and
+    state) to round-off; sliding flags the SLIDE contacts exactly; edges share scalars both ways."""
+    from rheograph.graphs.features import HISTORY_EDGE_FEATURES
+    from rheograph.sim import contacts
+    from rheograph.sim.integrator import Simulation
+    from rheograph.sim.params import SimParams
+    from rheograph.sim.stress import spring_stress, stress_unit_factor
+
+    params = SimParams(n_particles=64, phi=0.78, stress=50.0, integrator="implicit", disp_max=2e-3)
+    sim = Simulation(params)
+    for _ in range(400):
+        sim.step()
+    s = sim.state
+    nvec, r, xi, _ = pair_geometry(s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset)
+    # the contact states of these positions, as the next step (and a recorded snapshot) has them
+    contacts.critical_load_update(
+        s.radii,
+        s.pair_i,
+        s.pair_j,
+        nvec,
+        xi,
+        s.stretch,
+        s.contact_state,
+        params.kn,
+        params.kt,
+        params.mu,
+        1.0,
+    )
+    touching = s.contact_state != contacts.NONE
+    assert touching.sum() > 10 and np.abs(s.stretch[touching]).max() > 0  # frictional springs present
+    f_on_i = contacts.contact_spring_forces(
+        s.radii,
+        s.pair_i,
+        s.pair_j,
+        nvec,
+        xi,
+        s.stretch,
+        s.contact_state,
+        params.kn,
+        params.kt,
+        np.zeros(3 * s.radii.size),
+    )
+    expected = (
+        stress_unit_factor(s.lx, s.ly) * spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, False)[1]
+    )
+    recorded = (np.stack([s.pair_i, s.pair_j], 1)[touching], s.contact_state[touching], s.stretch[touching])
+    run_params = dataclasses.asdict(params)
+    _, feats, pairs = snapshot_edges(s.positions, s.radii, s.lx, s.ly, s.le_offset, 0.5, run_params, recorded)
+    npair = pairs["i"].size
+    total = np.sum(feats["spring_shear"][:npair] - feats["contact_shear"][:npair])
+    assert 6 * np.pi / (s.lx * s.ly) * params.stress * total == pytest.approx(expected, rel=1e-10)
+    assert feats["sliding"][:npair].sum() == np.sum(s.contact_state == contacts.SLIDE)
+    for name in HISTORY_EDGE_FEATURES:
+        np.testing.assert_array_equal(feats[name][:npair], feats[name][npair:])
+    # without recorded contacts the history features are simply not there
+    _, plain, _ = snapshot_edges(s.positions, s.radii, s.lx, s.ly, s.le_offset, 0.5, run_params)
+    assert not set(HISTORY_EDGE_FEATURES) & set(plain)
+
+
+def test_history_graphs_read_the_recorded_contacts_and_refuse_files_without_them(tiny_files, tmp_path):
+    from rheograph.errors import InputError
+
+    settings = GraphSettings(
+        edge_features=("contact", "tangential_stretch", "sliding", "spring_shear"), min_strain=0.05
+    )
+    graphs = snapshot_graphs(tiny_files[2], settings, run_id=0)  # sigma = 50: frictional contacts
+    attr = torch.cat([g.edge_attr for g in graphs]).numpy()
+    assert np.all(attr[attr[:, 0] == 0, 1:] == 0)  # no spring between surfaces apart
+    assert np.abs(attr[:, 3]).max() > 0 and attr[:, 1].max() > 0
+    stripped = tmp_path / "no_contacts.h5"
+    stripped.write_bytes(Path(tiny_files[2]).read_bytes())
+    with h5py.File(stripped, "a") as h5:
+        del h5["snapshots/contact_pairs"]
+    with pytest.raises(InputError, match="history features"):
+        snapshot_graphs(stripped, settings, run_id=0)

@@ -19,6 +19,7 @@ from rheograph.errors import InputError
 from rheograph.graphs.features import (
     EDGE_FEATURES,
     GRAPH_INPUTS,
+    HISTORY_EDGE_FEATURES,
     PAPER_EDGE_FEATURES,
     forward_transform,
     node_features,
@@ -109,13 +110,31 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
         # an arrested packing is a state of its own, not a start-up transient: kept at any strain
         keep = np.flatnonzero(((strain >= settings.min_strain) | jammed) & np.isfinite(raw).all(axis=1))
         positions = sn["positions"][keep] if keep.size else np.empty((0, radii.size, 2))
+        contacts = [None] * keep.size
+        if set(settings.edge_features) & set(HISTORY_EDGE_FEATURES):
+            if "contact_pairs" not in sn:
+                raise InputError(
+                    f"{path}: graph.edge_features has history features {list(HISTORY_EDGE_FEATURES)}, "
+                    "which need the contact states a rheograph trajectory records per snapshot; this "
+                    "file has none: use features computed from positions"
+                )
+            offset, pairs, states = sn["contact_offset"][()], sn["contact_pairs"][()], sn["contact_state"][()]
+            stretches = sn["contact_stretch"][()]
+            contacts = [
+                (
+                    pairs[offset[k] : offset[k + 1]],
+                    states[offset[k] : offset[k + 1]],
+                    stretches[offset[k] : offset[k + 1]],
+                )
+                for k in keep
+            ]
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
     known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
     u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
     graphs = []
     for k, idx in enumerate(keep):
         edge_index, feats, pairs = snapshot_edges(
-            positions[k], radii, lx, ly, offsets[idx], settings.cutoff, params
+            positions[k], radii, lx, ly, offsets[idx], settings.cutoff, params, contacts[k]
         )
         edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
         y = settings.transform_targets(*raw[idx])

@@ -24,7 +24,14 @@ Edge features, by name (``EDGE_FEATURES``):
 * stress-conditioned (needs the imposed stress, as every simulation and rheometer knows it):
   ``load`` = asinh(F_n / F_CL) of the contact spring F_n = k_n a_bar overlap (0 when apart).  The
   Critical Load Model makes a contact frictional exactly when F_n > F_CL, i.e. load > asinh(1):
-  ``frictional`` is that flag (1 for a frictional contact), whose sum over pairs is N Z_mu / 2.
+  ``frictional`` is that flag (1 for a frictional contact), whose sum over pairs is N Z_mu / 2;
+* contact history (a diagnostic, not from positions: needs the simulator's contact states, which every
+  rheograph trajectory records per snapshot): ``tangential_stretch`` (|stretch| of the tangential spring
+  in units of delta_sigma, 0 when apart), ``sliding`` (1 for a contact sliding at the Coulomb limit) and
+  ``spring_shear`` = kt_ratio a_bar r sym(n (x) stretch)_xy / delta_sigma, the tangential spring's shear
+  stresslet in units of sigma: the simulator's spring shear stress is (6 pi / area) sigma times the sum
+  over pairs of (spring_shear - contact_shear).  They measure how much of the targets positions cannot
+  know (docs/benchmarks.md §4).
 
 All features are O(1) numbers on purpose; the model standardises them with statistics of its training
 folds anyway.
@@ -50,7 +57,9 @@ PHYSICS_EDGE_FEATURES = (
     "lubrication_shear",
 )
 STRESS_EDGE_FEATURES = ("load", "frictional")
-EDGE_FEATURES = PAPER_EDGE_FEATURES + PHYSICS_EDGE_FEATURES + STRESS_EDGE_FEATURES
+HISTORY_EDGE_FEATURES = ("tangential_stretch", "sliding", "spring_shear")
+EDGE_FEATURES = PAPER_EDGE_FEATURES + PHYSICS_EDGE_FEATURES + STRESS_EDGE_FEATURES + HISTORY_EDGE_FEATURES
+SLIDE = 3  # rheograph.sim.contacts.SLIDE: the contact state of a spring at the Coulomb limit
 
 
 def overlap_unit(kn_coefficient: float) -> float:
@@ -85,10 +94,37 @@ def snapshot_pairs(positions, radii, lx, ly, le_offset, cutoff, params) -> dict:
     }
 
 
-def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params):
+def contact_history(pairs: dict, contacts, n_particles: int, kn_coefficient: float) -> dict:
+    """Per pair of ``pairs`` (``snapshot_pairs``): the tangential spring ``stretch`` (P, 2) [delta_sigma]
+    and ``sliding`` (P,) bool, from the recorded ``contacts`` = (pairs (C, 2), states (C,), stretches
+    (C, 2) [a]) of one snapshot; zero for pairs not recorded as touching.  A recorded pair (j, i) with
+    i < j carries the stretch of i relative to j, hence the sign flip."""
+    recorded, states, stretches = contacts
+    recorded = np.asarray(recorded, dtype=np.int64).reshape(-1, 2)
+    flip = recorded[:, 0] > recorded[:, 1]
+    key = np.minimum(recorded[:, 0], recorded[:, 1]) * n_particles + np.maximum(
+        recorded[:, 0], recorded[:, 1]
+    )
+    lookup = {int(k): c for c, k in enumerate(key)}
+    stretch = np.zeros((pairs["i"].size, 2))
+    sliding = np.zeros(pairs["i"].size, dtype=bool)
+    unit = overlap_unit(kn_coefficient)
+    for p, (i, j) in enumerate(zip(pairs["i"], pairs["j"])):
+        c = lookup.get(int(min(i, j)) * n_particles + int(max(i, j)))
+        if c is None:
+            continue
+        sign = -1.0 if flip[c] != (i > j) else 1.0
+        stretch[p] = sign * np.asarray(stretches[c], dtype=np.float64) / unit
+        sliding[p] = states[c] == SLIDE
+    return {"stretch": stretch, "sliding": sliding}
+
+
+def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params, contacts=None):
     """Directed edges (2, 2P) and every edge feature for pairs with gap < cutoff (units of a).
 
-    ``params`` is the run's parameter mapping (``delta``, ``kn_coefficient``, ``stress`` are read).
+    ``params`` is the run's parameter mapping (``delta``, ``kn_coefficient``, ``stress``, ``kt_ratio`` are
+    read); ``contacts`` the snapshot's recorded contact states (see ``contact_history``), needed only by
+    the history features (absent: they are not computed).
     Returns (edge_index, features dict of (2P,) float64 arrays, the pair dict of ``snapshot_pairs``).
     Edge k and k + P are the two directions of one pair; the vector of the second is the negative of the
     first, scalar features are shared.
@@ -117,6 +153,14 @@ def snapshot_edges(positions, radii, lx, ly, le_offset, cutoff, params):
         "load": (load, 1.0),
         "frictional": ((load > np.arcsinh(1.0)).astype(np.float64), 1.0),
     }
+    if contacts is not None:
+        history = contact_history(p, contacts, radii.size, float(params["kn_coefficient"]))
+        sx, sy = history["stretch"][:, 0], history["stretch"][:, 1]
+        pair_features["tangential_stretch"] = (np.hypot(sx, sy), 1.0)
+        pair_features["sliding"] = (history["sliding"].astype(np.float64), 1.0)
+        # n and the stretch both flip with the pair's direction: their product does not
+        shear = float(params["kt_ratio"]) * abar * r * 0.5 * (nx * sy + ny * sx)
+        pair_features["spring_shear"] = (shear, 1.0)
     edge_index = np.stack([np.r_[p["i"], p["j"]], np.r_[p["j"], p["i"]]])
     feats = {name: np.r_[value, sign * value] for name, (value, sign) in pair_features.items()}
     return edge_index, feats, p
