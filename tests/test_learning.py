@@ -584,33 +584,11 @@ def test_history_features_reproduce_the_simulators_spring_shear_stress():
     s = sim.state
     nvec, r, xi, _ = pair_geometry(s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset)
     # the contact states of these positions, as the next step (and a recorded snapshot) has them
-    contacts.critical_load_update(
-        s.radii,
-        s.pair_i,
-        s.pair_j,
-        nvec,
-        xi,
-        s.stretch,
-        s.contact_state,
-        params.kn,
-        params.kt,
-        params.mu,
-        1.0,
-    )
+    springs = (s.radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, params.kn, params.kt)
+    contacts.critical_load_update(*springs, params.mu, params.critical_load)
     touching = s.contact_state != contacts.NONE
     assert touching.sum() > 10 and np.abs(s.stretch[touching]).max() > 0  # frictional springs present
-    f_on_i = contacts.contact_spring_forces(
-        s.radii,
-        s.pair_i,
-        s.pair_j,
-        nvec,
-        xi,
-        s.stretch,
-        s.contact_state,
-        params.kn,
-        params.kt,
-        np.zeros(3 * s.radii.size),
-    )
+    f_on_i = contacts.contact_spring_forces(*springs, np.zeros(3 * s.radii.size))
     expected = (
         stress_unit_factor(s.lx, s.ly) * spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, False)[1]
     )
