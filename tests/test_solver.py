@@ -50,6 +50,13 @@ def test_backend_matches_dense_solve_and_reuses_the_analysis(name):
             scale = np.abs(dense).max() * np.abs(x).max()
             assert np.abs(dense @ x - b).max() < 1e-10 * scale
             np.testing.assert_allclose(x, np.linalg.solve(dense, b), rtol=1e-7, atol=1e-9 * np.abs(x).max())
+        # several right-hand sides in one call (the integrator's two columns): the same solutions
+        both = solver.solve(np.asfortranarray(rhs.T))
+        assert both.shape == (ndof, 2)
+        for k, b in enumerate(rhs):
+            np.testing.assert_allclose(
+                both[:, k], solver.solve(b), rtol=1e-12, atol=1e-14 * np.abs(both).max()
+            )
 
 
 @needs_cholmod

@@ -253,9 +253,13 @@ class Simulation:
             self.diag_slot,
             self.indices.shape[0],
         )
-        rhs_const = np.zeros(3 * radii.shape[0])
+        # right-hand sides: column 0 the contact springs (rate-independent), column 1 the affine flow at
+        # unit rate; solved together (one pass over the factor)
+        rhs = np.empty((3 * radii.shape[0], 2), order="F")  # contiguous columns
+        rhs[:, 0] = 0.0
+        rhs[:, 1] = rhs_rate
         f_on_i = contacts.contact_spring_forces(
-            radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, kn, kt, rhs_const
+            radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, kn, kt, rhs[:, 0]
         )
         t2 = clock()
         timings["assembly"] += t2 - t1
@@ -263,19 +267,19 @@ class Simulation:
             self.solver.factorize(data)
             t3 = clock()
             timings["factorisation"] += t3 - t2
-            vel_const = self.solver.solve(rhs_const)
-            vel_rate = self.solver.solve(rhs_rate)
+            vels = self.solver.solve(rhs)
         else:  # nothing interacts: R_FU is the one-body drag, a diagonal
             t3 = clock()
-            vel_const = rhs_const / self.drag
-            vel_rate = rhs_rate / self.drag
+            vels = rhs / self.drag[:, None]
+        vel_const, vel_rate = np.ascontiguousarray(vels[:, 0]), np.ascontiguousarray(vels[:, 1])
         t4 = clock()
         timings["solve"] += t4 - t3
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
         geometry = (radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact)
-        lub0, dash0 = pair_stress_sums(vel_const, 0.0, *geometry, k_normal, k_tangential, record)
-        lub1, dash1 = pair_stress_sums(vel_rate, 1.0, *geometry, k_normal, k_tangential, record)
+        lub0, dash0, lub1, dash1 = pair_stress_sums(
+            vel_const, vel_rate, *geometry, k_normal, k_tangential, record
+        )
         spring = spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, record)
         f = self.stress_factor
         solvent_unit = np.array([0.0, 1.0, 0.0])  # 2 eta0 E at unit rate, in sigma0

@@ -61,8 +61,8 @@ def _add_lubrication_stresslet(out, coeff, nx, ny, ui, uj, wi, wj, exx, exy, eyy
 
 @njit(cache=True)
 def pair_stress_sums(
-    vel,
-    rate,
+    vel_const,
+    vel_rate,
     radii,
     pair_i,
     pair_j,
@@ -76,16 +76,19 @@ def pair_stress_sums(
     k_tangential,
     full,
 ):
-    """Sum of pair stresslets (xx, xy, yy) for non-affine velocities ``vel`` (3N) and shear rate ``rate``.
+    """Sums of pair stresslets (xx, xy, yy) for the two parts of the solution, the velocities at zero
+    shear rate ``vel_const`` (3N) and the velocities per unit shear rate ``vel_rate`` (3N) with the
+    affine flow at unit rate: the stress at rate g is S(const) + g S(rate).
 
-    Returns (lubrication (3,), dashpot (3,)).  The dashpot force on i, F_i = -[R_pair (v + affine)]_i with
-    the affine relative motion at ``rate``, enters the contact virial r_ij (x) F_ij (r_ij from i to j,
-    F_ij the force on i), symmetrised.  Springs at the start of the step are handled by
-    ``spring_stress``; their implicit change over the step (``k_normal``, ``k_tangential``) is part of the
-    contact block and so of this force.
+    Returns (lubrication, dashpot) at zero rate and (lubrication, dashpot) per unit rate, each (3,).
+    One pass over the pairs for both (each pair's contact block is built once).  The dashpot force on
+    i, F_i = -[R_pair (v + affine)]_i, enters the contact virial r_ij (x) F_ij (r_ij from i to j, F_ij
+    the force on i), symmetrised.  Springs at the start of the step are handled by ``spring_stress``;
+    their implicit change over the step (``k_normal``, ``k_tangential``) is part of the contact block
+    and so of this force.
     """
-    lub = np.zeros(3)
-    dash = np.zeros(3)
+    lub = np.zeros((2, 3))
+    dash = np.zeros((2, 3))
     ui = np.empty(2)
     uj = np.empty(2)
     vp = np.empty(6)
@@ -96,32 +99,48 @@ def pair_stress_sums(
         nx = nvec[p, 0]
         ny = nvec[p, 1]
         if lubricated[p]:
-            ui[0] = vel[3 * i]
-            ui[1] = vel[3 * i + 1]
-            uj[0] = vel[3 * j]
-            uj[1] = vel[3 * j + 1]
-            _add_lubrication_stresslet(
-                lub, coeff[p], nx, ny, ui, uj, vel[3 * i + 2], vel[3 * j + 2], 0.0, 0.5 * rate, 0.0, full
-            )
+            for part in range(2):
+                vel = vel_const if part == 0 else vel_rate
+                ui[0] = vel[3 * i]
+                ui[1] = vel[3 * i + 1]
+                uj[0] = vel[3 * j]
+                uj[1] = vel[3 * j + 1]
+                _add_lubrication_stresslet(
+                    lub[part],
+                    coeff[p],
+                    nx,
+                    ny,
+                    ui,
+                    uj,
+                    vel[3 * i + 2],
+                    vel[3 * j + 2],
+                    0.0,
+                    0.5 * part,
+                    0.0,
+                    full,
+                )
         elif in_contact[p]:
             contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p], R)
-            for q in range(3):
-                vp[q] = vel[3 * i + q]
-                vp[3 + q] = vel[3 * j + q]
-            vp[3] += rate * dy[p]
-            vp[2] -= 0.5 * rate
-            vp[5] -= 0.5 * rate
-            fx = 0.0
-            fy = 0.0
-            for q in range(6):
-                fx -= R[0, q] * vp[q]
-                fy -= R[1, q] * vp[q]
             rr = r[p]
-            dash[1] += 0.5 * rr * (nx * fy + ny * fx)
-            if full:
-                dash[0] += rr * nx * fx
-                dash[2] += rr * ny * fy
-    return lub, dash
+            for part in range(2):
+                vel = vel_const if part == 0 else vel_rate
+                for q in range(3):
+                    vp[q] = vel[3 * i + q]
+                    vp[3 + q] = vel[3 * j + q]
+                if part == 1:  # the affine flow at unit rate
+                    vp[3] += dy[p]
+                    vp[2] -= 0.5
+                    vp[5] -= 0.5
+                fx = 0.0
+                fy = 0.0
+                for q in range(6):
+                    fx -= R[0, q] * vp[q]
+                    fy -= R[1, q] * vp[q]
+                dash[part, 1] += 0.5 * rr * (nx * fy + ny * fx)
+                if full:
+                    dash[part, 0] += rr * nx * fx
+                    dash[part, 2] += rr * ny * fy
+    return lub[0], dash[0], lub[1], dash[1]
 
 
 @njit(cache=True)
