@@ -174,6 +174,34 @@ def test_datamodule_splits_and_scaling(tiny_files, tmp_path, split):
     assert set().union(*seen) == set(range(len(dm.dataset)))  # every snapshot is tested once
 
 
+def test_thin_snapshots_keeps_every_run_evenly_spaced():
+    from rheograph.learn.datamodule import thin_snapshots
+
+    runs = np.repeat([0, 1, 2], [10, 4, 1])
+    idx = np.arange(15)
+    kept = thin_snapshots(idx, runs, 0.5)
+    np.testing.assert_array_equal(kept, [0, 2, 4, 7, 9, 10, 13, 14])  # 5 of 10 (ends kept), 2 of 4, 1 of 1
+    np.testing.assert_array_equal(thin_snapshots(idx, runs, 1.0), idx)
+    assert set(runs[thin_snapshots(idx, runs, 0.01)]) == {0, 1, 2}  # at least one snapshot per run
+
+
+def test_train_fraction_thins_only_the_training_part(tiny_files, tmp_path):
+    from rheograph.errors import InputError
+
+    full = SnapshotDataModule(tiny_files, str(tmp_path), SETTINGS, fold=0, num_folds=3, split="grouped")
+    half = SnapshotDataModule(
+        tiny_files, str(tmp_path), SETTINGS, fold=0, num_folds=3, split="grouped", train_fraction=0.5
+    )
+    full.setup(), half.setup()
+    np.testing.assert_array_equal(full.test_idx, half.test_idx)
+    np.testing.assert_array_equal(full.val_idx, half.val_idx)
+    assert set(half.train_idx) < set(full.train_idx)
+    runs = full.dataset.run_id.numpy()
+    assert set(runs[half.train_idx]) == set(runs[full.train_idx])
+    with pytest.raises(InputError, match=r"data.train_fraction=0.0 is invalid: allowed \(0, 1\]"):
+        SnapshotDataModule(tiny_files, str(tmp_path), SETTINGS, train_fraction=0.0)
+
+
 def test_prediction_is_invariant_to_node_permutation(tiny_files):
     torch.manual_seed(0)
     g = snapshot_graphs(tiny_files[2], SETTINGS, 0)[0]
@@ -440,10 +468,14 @@ def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
     assert np.isfinite(masked.item()) and masked.item() < 1e3 and only_flowing.item() > 0
 
 
-@pytest.mark.parametrize("norm", ["batch", "layer"])
-def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files, norm):
-    """Summed messages, per-area pooling, the edge readout and the graph input, with either normalisation:
-    a relabelling of the particles and a reordering of the pairs change nothing."""
+@pytest.mark.parametrize(
+    "norm, global_mixing",
+    [("batch", "none"), ("layer", "none"), ("batch", "virtual_node"), ("batch", "attention")],
+)
+def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files, norm, global_mixing):
+    """Summed messages, per-area pooling, the edge readout and the graph input, with either normalisation
+    and with or without a non-local update: a relabelling of the particles and a reordering of the pairs
+    change nothing."""
     torch.manual_seed(1)
     g = snapshot_graphs(tiny_files[2], SETTINGS, 0)[0]
     model = ResGCN(
@@ -457,6 +489,7 @@ def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files, norm):
         head_layers=2,
         edge_readout=True,
         norm=norm,
+        global_mixing=global_mixing,
     ).eval()
     perm = torch.randperm(g.num_nodes)
     inv = torch.empty_like(perm)
@@ -467,6 +500,36 @@ def test_physics_model_is_invariant_to_node_and_edge_order(tiny_files, norm):
     out = model(g.x, g.edge_index, g.edge_attr, batch, u, area)
     out_perm = model(g.x[perm], inv[g.edge_index][:, order], g.edge_attr[order], batch, u, area)
     torch.testing.assert_close(out, out_perm, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("global_mixing", ["virtual_node", "attention"])
+def test_non_local_update_keeps_graphs_of_a_batch_apart(tiny_files, global_mixing):
+    """The virtual node and the attention mix particles within a graph, never across graphs: a graph's
+    prediction is the same alone and batched with another (and the other graph does change under the
+    mixing: the update is not a no-op)."""
+    torch.manual_seed(2)
+    g, h = snapshot_graphs(tiny_files[2], SETTINGS, 0)[:2]
+    model = ResGCN(2, 6, hidden=16, aggr="add", pool="area", dropout=0.0, global_mixing=global_mixing).eval()
+    plain = ResGCN(2, 6, hidden=16, aggr="add", pool="area", dropout=0.0).eval()
+    plain.load_state_dict(model.state_dict(), strict=False)
+
+    def run(net, graphs):
+        batch = torch.cat([torch.full((x.num_nodes,), k) for k, x in enumerate(graphs)])
+        offsets = np.cumsum([0] + [x.num_nodes for x in graphs[:-1]])
+        edges = torch.cat([x.edge_index + int(o) for x, o in zip(graphs, offsets)], dim=1)
+        attrs = torch.cat([x.edge_attr for x in graphs])
+        area = torch.cat([x.area for x in graphs])
+        return net(torch.cat([x.x for x in graphs]), edges, attrs, batch, None, area)
+
+    torch.testing.assert_close(run(model, [g, h])[0], run(model, [g])[0], rtol=1e-5, atol=1e-5)
+    assert not torch.allclose(run(model, [g]), run(plain, [g]), rtol=1e-3, atol=1e-3)
+
+
+def test_unknown_global_mixing_is_refused_by_name():
+    from rheograph.errors import InputError
+
+    with pytest.raises(InputError, match=r"model.global_mixing='transformer' is invalid"):
+        ResGCN(2, 6, global_mixing="transformer")
 
 
 def test_unknown_normalisation_is_refused_by_name():

@@ -99,6 +99,7 @@ class SnapshotDataModule(L.LightningDataModule):
         num_workers: int = 0,
         phi: float | None = None,
         n_particles: int | None = None,
+        train_fraction: float = 1.0,
     ):
         super().__init__()
         if split not in SPLITS:
@@ -107,6 +108,8 @@ class SnapshotDataModule(L.LightningDataModule):
             raise InputError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
         if not 0 <= fold < num_folds:
             raise InputError(f"data.fold={fold} is invalid: allowed 0..{num_folds - 1}")
+        if not 0.0 < train_fraction <= 1.0:
+            raise InputError(f"data.train_fraction={train_fraction} is invalid: allowed (0, 1]")
         if batch_size < 1:
             raise InputError(f"data.batch_size={batch_size} is invalid: allowed >= 1")
         self.files = expand_files(files)
@@ -114,6 +117,7 @@ class SnapshotDataModule(L.LightningDataModule):
         self.cache_dir, self.fold, self.num_folds = cache_dir, fold, num_folds
         self.split, self.split_seed, self.batch_size = split, split_seed, batch_size
         self.num_workers, self.phi, self.n_particles = num_workers, phi, n_particles
+        self.train_fraction = train_fraction
         self.dataset = None
 
     def setup(self, stage=None):
@@ -158,6 +162,8 @@ class SnapshotDataModule(L.LightningDataModule):
             self.test_idx = index[folds == self.fold]
             self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
             self.train_idx = index[(folds != self.fold) & (folds != (self.fold + 1) % self.num_folds)]
+        if self.train_fraction < 1.0:
+            self.train_idx = thin_snapshots(self.train_idx, runs, self.train_fraction)
         # edge-feature standardisation, fitted on the training graphs only (binary and constant
         # features get std 1 where they do not vary)
         edges = torch.cat([dataset[int(i)].edge_attr for i in self.train_idx]).double()
@@ -212,6 +218,18 @@ class SnapshotDataModule(L.LightningDataModule):
 
     def test_dataloader(self):
         return self._loader(self.test_idx, False)
+
+
+def thin_snapshots(idx: np.ndarray, runs: np.ndarray, fraction: float) -> np.ndarray:
+    """Keep ``fraction`` of the snapshots ``idx`` of every run, evenly spaced along it (at least one per
+    run): a learning curve in snapshots per trajectory that keeps every run and so every state point.
+    ``runs`` (all graphs,) gives each graph's run; graphs of a run are in strain order."""
+    kept = []
+    for run in np.unique(runs[idx]):
+        members = np.sort(idx[runs[idx] == run])
+        n_keep = max(1, int(round(fraction * members.size)))
+        kept.append(members[np.unique(np.round(np.linspace(0, members.size - 1, n_keep)).astype(np.int64))])
+    return np.sort(np.concatenate(kept))
 
 
 def trajectory_param(path: str, key: str) -> float:

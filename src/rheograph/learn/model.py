@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 from torch_geometric.nn import DeepGCNLayer, GENConv, global_add_pool, global_max_pool, global_mean_pool
+from torch_geometric.utils import to_dense_batch
 
 from rheograph.errors import InputError
 
@@ -19,12 +20,46 @@ POOLS = {"mean": global_mean_pool, "add": global_add_pool, "max": global_max_poo
 BLOCKS = ("res", "res+", "dense", "plain")
 AGGRS = ("softmax", "mean", "add", "max", "powermean")
 NORMS = {"batch": nn.BatchNorm1d, "layer": nn.LayerNorm}  # per-feature over the batch | per node
+GLOBAL_MIXING = ("none", "virtual_node", "attention")
+
+
+class VirtualNode(nn.Module):
+    """Global context: the mean node embedding of each graph through a two-layer MLP, broadcast back to
+    its nodes.  x (N, hidden), batch (N,) -> (N, hidden)."""
+
+    def __init__(self, hidden: int):
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden))
+
+    def forward(self, x, batch):
+        return self.mlp(global_mean_pool(x, batch))[batch]
+
+
+class GraphAttention(nn.Module):
+    """Multi-head self-attention among all particles of a graph (pre-layer-norm; padded per graph and
+    masked): every particle reads every other, whatever the graph distance.
+    x (N, hidden), batch (N,) -> (N, hidden)."""
+
+    def __init__(self, hidden: int, heads: int = 4):
+        super().__init__()
+        self.norm = nn.LayerNorm(hidden)
+        self.attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
+
+    def forward(self, x, batch):
+        dense, mask = to_dense_batch(self.norm(x), batch)
+        out, _ = self.attn(dense, dense, dense, key_padding_mask=~mask, need_weights=False)
+        return out[mask]
 
 
 class ResGCN(nn.Module):
     """Node/edge encoders -> ``num_layers`` DeepGCN layers (GENConv, ``norm`` normalisation — batch, the
     seed paper's, or layer, DeeperGCN's — ReLU, dropout, residual)
     -> graph pooling -> head (``head_layers`` linear layers) with ``out_channels`` outputs.
+
+    With ``global_mixing`` every layer's output also receives a non-local update (added residually): a
+    virtual node (the graph's mean embedding through an MLP) or self-attention among all particles.  Why:
+    the shear rate at imposed stress comes from a global solve of the lubrication network, which two
+    rounds of local messages can only approximate.
 
     Graph-level inputs u (G, global_in) — the imposed log stress, phi — are encoded and added to every node
     embedding before message passing, and concatenated to the pooled embedding before the head.
@@ -54,6 +89,7 @@ class ResGCN(nn.Module):
         head_layers: int = 1,
         edge_readout: bool = False,
         norm: str = "batch",
+        global_mixing: str = "none",
     ):
         super().__init__()
         if block not in BLOCKS:
@@ -64,6 +100,8 @@ class ResGCN(nn.Module):
             raise InputError(f"model.aggr={aggr!r} is invalid: allowed {AGGRS}")
         if norm not in NORMS:
             raise InputError(f"model.norm={norm!r} is invalid: allowed {tuple(NORMS)}")
+        if global_mixing not in GLOBAL_MIXING:
+            raise InputError(f"model.global_mixing={global_mixing!r} is invalid: allowed {GLOBAL_MIXING}")
         if num_layers < 1 or hidden < 1 or head_layers < 1:
             raise InputError("model.num_layers, model.hidden and model.head_layers must be >= 1")
         self.block, self.pool_name, self.global_in = block, pool, global_in
@@ -98,6 +136,8 @@ class ResGCN(nn.Module):
                     ckpt_grad=False,
                 )
             )
+        mixer = {"none": None, "virtual_node": VirtualNode, "attention": GraphAttention}[global_mixing]
+        self.mixers = nn.ModuleList(mixer(hidden) for _ in range(num_layers)) if mixer else None
         self.dropout = dropout
         self.pool = POOLS[pool]
         head, width = [], hidden + global_in + (edge_in if edge_readout else 0)
@@ -116,16 +156,14 @@ class ResGCN(nn.Module):
         e = self.edge_encoder(scaled)
         if self.global_encoder is not None:
             x = x + self.global_encoder(u)[batch]
-        if self.block == "res+":
-            # pre-activation residual: the first conv has no norm/act before it; a final norm+act after
-            x = self.layers[0].conv(x, edge_index, e)
-            for layer in self.layers[1:]:
-                x = layer(x, edge_index, e)
+        for k, layer in enumerate(self.layers):
+            # res+ is a pre-activation residual: the first conv has no norm/act before it
+            x = layer.conv(x, edge_index, e) if k == 0 and self.block == "res+" else layer(x, edge_index, e)
+            if self.mixers is not None:
+                x = x + self.mixers[k](x, batch)
+        if self.block == "res+":  # final norm + act of the pre-activation stack
             x = self.layers[0].act(self.layers[0].norm(x))
             x = nn.functional.dropout(x, p=self.dropout, training=self.training)
-        else:
-            for layer in self.layers:
-                x = layer(x, edge_index, e)
         pooled = self.pool(x, batch, area) if self.pool_name == "area" else self.pool(x, batch)
         if self.edge_readout is not None:
             graphs = int(batch.max()) + 1 if batch.numel() else 0

@@ -148,6 +148,7 @@ class SurrogateModule(L.LightningModule):
         head_layers: int = 1,
         edge_readout: bool = False,
         norm: str = "batch",
+        global_mixing: str = "none",
         lr: float = 5e-3,
         weight_decay: float = 0.0,
         loss_weights=(1.0, 1.0, 1.0),
@@ -182,6 +183,7 @@ class SurrogateModule(L.LightningModule):
             head_layers=head_layers,
             edge_readout=edge_readout,
             norm=norm,
+            global_mixing=global_mixing,
         )
         self.register_buffer("target_mean", torch.zeros(3))
         self.register_buffer("target_std", torch.ones(3))
