@@ -113,3 +113,21 @@ def test_every_surrogate_study_variant_composes_valid_graph_settings():
             settings = graph_settings(compose(config_name="train", overrides=overrides))
             knows_stress = "log_stress" in settings.graph_inputs
             assert settings.pressure_per_stress == (knows_stress and name != "physics_pi_sigma0"), name
+
+
+def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
+    """Runs trained before data.train_fraction / model.global_mixing existed keep their fingerprint (they
+    resume and report as before); setting either option changes it."""
+    from rheograph.learn.train import NEUTRAL_LATER_OPTIONS, config_fingerprint
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=["~logger"])
+    current = config_fingerprint(cfg)
+    earlier = OmegaConf.to_container(cfg)
+    for group, key, _ in NEUTRAL_LATER_OPTIONS:
+        earlier[group].pop(key)
+    assert config_fingerprint(OmegaConf.create(earlier)) == current
+    for override in ("data.train_fraction=0.5", "model.global_mixing=virtual_node"):
+        with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+            changed = compose(config_name="train", overrides=["~logger", override])
+        assert config_fingerprint(changed) != current, override

@@ -263,12 +263,20 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     return summary
 
 
+NEUTRAL_LATER_OPTIONS = (("data", "train_fraction", 1.0), ("model", "global_mixing", "none"))
+
+
 def config_fingerprint(cfg: DictConfig) -> str:
     """Hash of everything that determines the trained folds (not which folds run, nor reporting)."""
     import hashlib
 
     skip = ("fold", "report", "threads", "fold_workers")  # how and which folds run, not what they learn
     keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in skip}
+    # options added later, at the value that reproduces what came before them: left out, so that runs
+    # trained before the option existed stay valid (resumable, reportable)
+    for group, key, neutral in NEUTRAL_LATER_OPTIONS:
+        if keep.get(group, {}).get(key, neutral) == neutral:
+            keep.get(group, {}).pop(key, None)
     keep["split_version"] = SPLIT_VERSION  # the fold assignment is code, not configuration
     return hashlib.sha1(json.dumps(keep, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
