@@ -599,35 +599,39 @@ def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_f
     assert caches[0].digest == caches[1].digest
 
 
-def test_per_phi_scores_split_a_pooled_models_predictions_by_area_fraction():
-    """A pooled model's report scores each phi on its own graphs: exact predictions at one phi give
-    R² 1 there whatever the other phi's errors, and jammed graphs never enter the viscosity score."""
-    from rheograph.learn.report import per_phi_scores
+def test_per_subset_scores_split_a_pooled_models_predictions_by_area_fraction_and_size():
+    """A pooled model's report scores each (phi, N) on its own graphs: exact predictions at one phi or one
+    size give R² 1 there whatever the others' errors, and jammed graphs never enter the viscosity score.
+    Folds written before N was recorded count as N = 0 (unknown)."""
+    from rheograph.learn.report import per_subset_scores
 
     rng = np.random.default_rng(0)
 
-    def fold(k):
-        phi = np.repeat([0.70, 0.76], 40)
-        stress = np.tile(np.repeat([1.0, 10.0], 20), 2)
+    def fold(k, sizes=True):
+        phi = np.repeat([0.70, 0.76, 0.76], 40)
+        size = np.repeat([400, 400, 2000], 40)
+        stress = np.tile(np.repeat([1.0, 10.0], 20), 3)
         true = np.stack(
-            [10 * stress * rng.uniform(1, 2, 80), stress * rng.uniform(0.5, 1, 80), rng.uniform(0, 2, 80)], 1
+            [10 * stress * rng.uniform(1, 2, 120), stress * rng.uniform(0.5, 1, 120), rng.uniform(0, 2, 120)],
+            1,
         )
         pred = true.copy()
-        pred[40:] *= rng.uniform(0.8, 1.2, (40, 3))  # errors at phi = 0.76 only
-        jammed = np.zeros(80, dtype=bool)
+        pred[40:80] *= rng.uniform(0.8, 1.2, (40, 3))  # errors at phi = 0.76, N = 400 only
+        jammed = np.zeros(120, dtype=bool)
         jammed[:5] = True
         pred[:5, 0] = 1e9  # a jammed graph's viscosity prediction: must not be scored
-        return dict(
-            fold=k, pred=pred, true=true, phi=phi, stress=stress, jammed=jammed, baselines={"x": true}
-        )
+        out = dict(fold=k, pred=pred, true=true, phi=phi, stress=stress, jammed=jammed, baselines={"x": true})
+        return {**out, "n_particles": size} if sizes else out
 
-    scores = per_phi_scores([fold(0), fold(1)])
-    assert set(scores) == {0.70, 0.76}
+    scores = per_subset_scores([fold(0), fold(1)])
+    assert set(scores) == {(0.70, 400), (0.76, 400), (0.76, 2000)}
     for key in ("r2_log_eta", "r2_log_pressure", "r2_z_mu"):
-        np.testing.assert_allclose(scores[0.70][key], 1.0)
-        assert np.all(scores[0.76][key] < 0.999)
-    assert np.all(scores[0.70]["n_jammed"] == 5) and np.all(scores[0.76]["n_jammed"] == 0)
-    np.testing.assert_allclose(per_phi_scores([fold(0)], model="x")[0.76]["r2_z_mu"], 1.0)
+        np.testing.assert_allclose(scores[(0.70, 400)][key], 1.0)
+        np.testing.assert_allclose(scores[(0.76, 2000)][key], 1.0)
+        assert np.all(scores[(0.76, 400)][key] < 0.999)
+    assert np.all(scores[(0.70, 400)]["n_jammed"] == 5) and np.all(scores[(0.76, 2000)]["n_jammed"] == 0)
+    np.testing.assert_allclose(per_subset_scores([fold(0)], model="x")[(0.76, 400)]["r2_z_mu"], 1.0)
+    assert set(per_subset_scores([fold(0, sizes=False)])) == {(0.70, 0), (0.76, 0)}
 
 
 def test_history_features_reproduce_the_simulators_spring_shear_stress():

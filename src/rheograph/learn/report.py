@@ -17,47 +17,59 @@ BASELINE_LABELS = {
 }
 
 
-def per_phi_scores(predictions: list[dict], model: str | None = None) -> dict[float, dict[str, np.ndarray]]:
-    """Test scores of a model trained over several area fractions, broken down per area fraction.
+def subsets(prediction: dict) -> np.ndarray:
+    """(G, 2) array of each test graph's (phi, N); N = 0 where the fold did not record it."""
+    size = prediction.get("n_particles", np.zeros(len(prediction["phi"])))
+    return np.stack([np.round(prediction["phi"], 6), np.asarray(size, dtype=np.float64)], axis=1)
+
+
+def per_subset_scores(
+    predictions: list[dict], model: str | None = None
+) -> dict[tuple[float, int], dict[str, np.ndarray]]:
+    """Test scores of a model trained over several area fractions or system sizes, broken down per
+    (phi, N).
 
     ``predictions``: the per-fold test predictions (``pred``, ``true`` (G, 3) physical units, ``phi``,
-    ``stress``, ``jammed`` (G,)); ``model``: None for the graph network, else a baseline name.  Returns
-    {phi: {metric: (n_folds,) values}}, the ``fold_metrics`` of each fold's test graphs at that phi (NaN
-    where a fold has fewer than 2 graphs there), so that a pooled model is compared with one model per
-    phi on the same footing.
+    ``stress``, ``jammed`` (G,), optionally ``n_particles`` (G,)); ``model``: None for the graph network,
+    else a baseline name.  Returns {(phi, N): {metric: (n_folds,) values}}, the ``fold_metrics`` of each
+    fold's test graphs of that (phi, N) (NaN where a fold has fewer than 2 graphs there), so that a pooled
+    model is compared with one model per (phi, N) on the same footing.
     """
-    phis = np.unique(np.round(np.concatenate([p["phi"] for p in predictions]), 6))
-    out: dict[float, dict[str, list]] = {float(v): {} for v in phis}
+    keys = np.unique(np.concatenate([subsets(p) for p in predictions]), axis=0)
+    out: dict[tuple[float, int], dict[str, list]] = {(float(f), int(n)): {} for f, n in keys}
     for p in predictions:
         pred = p["pred"] if model is None else p["baselines"][model]
-        for value in phis:
-            sel = np.isclose(p["phi"], value)
+        members = subsets(p)
+        for key in out:
+            sel = np.all(members == np.array(key, dtype=np.float64), axis=1)
             rows = (
                 fold_metrics(pred[sel], p["true"][sel], p["stress"][sel], p["jammed"][sel])
                 if sel.sum() > 1
                 else {}
             )
-            for key in set(rows) | set(out[float(value)]):
-                out[float(value)].setdefault(key, []).append(rows.get(key, np.nan))
-    return {phi: {k: np.asarray(v, dtype=np.float64) for k, v in m.items()} for phi, m in out.items()}
+            for name in set(rows) | set(out[key]):
+                out[key].setdefault(name, []).append(rows.get(name, np.nan))
+    return {key: {k: np.asarray(v, dtype=np.float64) for k, v in m.items()} for key, m in out.items()}
 
 
-def _per_phi_table(predictions: list[dict]) -> list[str]:
-    """Markdown rows: per area fraction, the network's R² (mean ± std over folds) beside the trees'."""
-    net = per_phi_scores(predictions)
+def _per_subset_table(predictions: list[dict]) -> list[str]:
+    """Markdown rows: per (area fraction, system size), the network's R² (mean ± std over folds) beside
+    the trees'."""
+    net = per_subset_scores(predictions)
     trees = (
-        per_phi_scores(predictions, "descriptors")
+        per_subset_scores(predictions, "descriptors")
         if "descriptors" in predictions[0].get("baselines", {})
         else {}
     )
     lines = [
-        "## Per area fraction",
+        "## Per area fraction and system size",
         "",
-        "Test graphs of each φ, scored per fold (mean ± std over folds); trees: the descriptor baseline "
-        "on the same graphs.",
+        "Test graphs of each (φ, N), scored per fold (mean ± std over folds); trees: the descriptor "
+        "baseline on the same graphs.",
         "",
-        "| φ | test graphs | R² log η_r | R² log Π | R² Z_μ | fluct. η_r | trees: log η_r / log Π / Z_μ |",
-        "|---|---|---|---|---|---|---|",
+        "| φ | N | test graphs | R² log η_r | R² log Π | R² Z_μ | fluct. η_r "
+        "| trees: log η_r / log Π / Z_μ |",
+        "|---|---|---|---|---|---|---|---|",
     ]
 
     def ms(values):
@@ -66,18 +78,18 @@ def _per_phi_table(predictions: list[dict]) -> list[str]:
             return "n/a"
         return f"{finite.mean():.4f} ± {finite.std(ddof=1) if finite.size > 1 else 0.0:.4f}"
 
-    for phi, m in net.items():
-        n = sum(int(np.isclose(p["phi"], phi).sum()) for p in predictions)
+    for (phi, n), m in net.items():
+        count = sum(int(np.all(subsets(p) == np.array([phi, n]), axis=1).sum()) for p in predictions)
         tree = (
             " / ".join(
-                f"{np.nanmean(trees[phi][f'r2_{k}']):.4f}" for k in ("log_eta", "log_pressure", "z_mu")
+                f"{np.nanmean(trees[(phi, n)][f'r2_{k}']):.4f}" for k in ("log_eta", "log_pressure", "z_mu")
             )
             if trees
             else "–"
         )
         lines.append(
-            f"| {phi:.2f} | {n} | {ms(m['r2_log_eta'])} | {ms(m['r2_log_pressure'])} | {ms(m['r2_z_mu'])} "
-            f"| {np.nanmean(m['fluct_eta']):.2f} | {tree} |"
+            f"| {phi:.2f} | {n or '?'} | {count} | {ms(m['r2_log_eta'])} | {ms(m['r2_log_pressure'])} "
+            f"| {ms(m['r2_z_mu'])} | {np.nanmean(m['fluct_eta']):.2f} | {tree} |"
         )
     return lines
 
@@ -156,8 +168,8 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
             f"nearest state point jammed): right on {right:.0f} of {runs} test trajectories ({jammed} of "
             "them jammed); η_r is not scored on jammed snapshots.",
         ]
-    if split != "phi" and np.unique(np.concatenate([p["phi"] for p in predictions])).size > 1:
-        lines += [""] + _per_phi_table(predictions)
+    if split != "phi" and np.unique(np.concatenate([subsets(p) for p in predictions]), axis=0).shape[0] > 1:
+        lines += [""] + _per_subset_table(predictions)
     lines += [
         "",
         "## Graph network per fold",

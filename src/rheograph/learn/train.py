@@ -324,7 +324,7 @@ def predict_dataset(module, dataset, batch_size: int = 64):
     from torch_geometric.loader import DataLoader
 
     module.eval()
-    preds, trues, stress, phi, run, jammed = [], [], [], [], [], []
+    preds, trues, stress, phi, run, jammed, size = [], [], [], [], [], [], []
     for batch in DataLoader(dataset, batch_size=batch_size):
         preds.append(module(batch).numpy())
         trues.append(batch.y_raw.numpy())
@@ -332,6 +332,7 @@ def predict_dataset(module, dataset, batch_size: int = 64):
         phi.append(batch.phi.numpy())
         run.append(batch.run_id.numpy())
         jammed.append(batch.jammed.numpy())
+        size.append(batch.n_particles.numpy())
     hp = module.hparams
     pred = physical_targets(np.concatenate(preds), hp.viscosity_scale, hp.pressure_scale)
     return (
@@ -342,6 +343,7 @@ def predict_dataset(module, dataset, batch_size: int = 64):
             "phi": np.concatenate(phi),
             "run_id": np.concatenate(run),
             "jammed": np.concatenate(jammed),
+            "n_particles": np.concatenate(size),
         },
     )
 
@@ -350,6 +352,8 @@ def _stack_predictions(predictions) -> dict:
     out = {}
     for key in ("pred", "true", "stress", "phi", "run_id", "jammed"):
         out[key] = np.concatenate([p[key] for p in predictions])
+    if all("n_particles" in p for p in predictions):  # folds finished before it was recorded lack it
+        out["n_particles"] = np.concatenate([p["n_particles"] for p in predictions])
     for name in predictions[0].get("baselines", {}):
         out[f"baseline_{name}"] = np.concatenate([p["baselines"][name] for p in predictions])
     out["fold"] = np.concatenate([np.full(p["pred"].shape[0], p["fold"]) for p in predictions])
