@@ -102,3 +102,22 @@ def test_jamming_onset_per_seed_names_what_is_still_open():
     assert jamming_onset(runs(s20="completed", s50="interrupted")) == "none up to 20 (50 unfinished)"
     assert jamming_onset(runs(s14="running", s20="jammed", s100="running")) == "20 (14 unfinished)"
     assert jamming_onset(runs(s0_5="interrupted")) == "none up to 0 (0.5 unfinished)"
+
+
+def test_flow_curve_cell_reports_the_arrested_packing_instead_of_nan():
+    """A state point whose seeds all arrested before the steady window has no steady means: the card
+    shows 'jammed' for eta_r and the arrested snapshots' Pi, Z_mu (mean ± standard error), never 'nan'."""
+    from rheograph.dataset_card import flow_curve_cell
+
+    nan = float("nan")
+    point = dict(n_particles=400, phi=0.8, stress=100.0, jammed=True)
+    point.update(viscosity=nan, viscosity_se=nan, pressure=nan, pressure_se=nan, z_mu=nan, z_mu_se=nan)
+    arrested = [np.array([200.0, 220.0]), np.array([240.0])]
+    records = [dict(n=400, phi=0.8, stress=100.0, arrested=dict(pressure=a, z_mu=a / 100)) for a in arrested]
+    records.append(dict(n=400, phi=0.8, stress=200.0, arrested=dict(pressure=np.array([1e6]), z_mu=[9])))
+    assert flow_curve_cell(point, "viscosity", records) == "jammed"
+    assert flow_curve_cell(point, "pressure", records) == "220 ± 12 (arrested)"
+    assert flow_curve_cell(point, "z_mu", records) == "2.2 ± 0.12 (arrested)"
+    flowing = dict(point, jammed=False, pressure=5.0, pressure_se=0.1)
+    assert flow_curve_cell(flowing, "pressure", records) == "5 ± 0.1"
+    assert flow_curve_cell(flowing, "z_mu", records) == "–"

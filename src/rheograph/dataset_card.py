@@ -75,6 +75,8 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
             # as the learning reads them: flowing after the transient, arrested packings at any strain
             flowing_snaps = (snap_strain >= min_strain) & ~jammed
             snaps = {k: sn[k][()][flowing_snaps] for k in (*TARGETS, "shear_rate")}
+            # the static packing under load: what a run that arrested before the steady window reports
+            arrested = {k: sn[k][()][jammed] for k in ("pressure", "z_mu")}
         cpu = run_cpu_seconds(path)
         steady = strain >= p["steady_state_strain"]
         flowing = entry["status"] != "jammed"
@@ -88,6 +90,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 status=entry["status"],
                 strain=entry["strain"],
                 snapshots=snaps,
+                arrested=arrested,
                 n_snapshots=int(flowing_snaps.sum() + jammed.sum()),
                 n_flowing_snapshots=int(flowing_snaps.sum()),
                 n_jammed_snapshots=int(jammed.sum()),
@@ -105,6 +108,29 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
             )
         )
     return records
+
+
+def flow_curve_cell(point: dict, key: str, records: list[dict]) -> str:
+    """One cell of the flow-curve table: the steady mean ± standard error over seeds; for a state point
+    whose every seed arrested before the steady window, η_r reads "jammed" and Π, Z_μ are the mean ±
+    standard error over its arrested-packing snapshots (all seeds pooled), marked "(arrested)"."""
+    if np.isfinite(point[key]):
+        return f"{point[key]:.4g} ± {point[key + '_se']:.2g}"
+    if not point["jammed"]:
+        return "–"
+    if key == "viscosity":
+        return "jammed"
+    values = np.concatenate(
+        [
+            r["arrested"][key]
+            for r in records
+            if (r["n"], r["phi"], r["stress"]) == (point["n_particles"], point["phi"], point["stress"])
+        ]
+    )
+    if values.size == 0:
+        return "jammed (no snapshot)"
+    se = values.std(ddof=1) / np.sqrt(values.size) if values.size > 1 else float("nan")
+    return f"{values.mean():.4g} ± {se:.2g} (arrested)"
 
 
 def jamming_onset(runs: list[dict]) -> str:
@@ -244,12 +270,7 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         "|---|---|---|---|---|---|---|",
     ]
     for pt in points:
-        cells = [
-            "jammed"
-            if (k == "viscosity" and pt["jammed"] and not np.isfinite(pt[k]))
-            else f"{pt[k]:.4g} ± {pt[k + '_se']:.2g}"
-            for k in TARGETS
-        ]
+        cells = [flow_curve_cell(pt, k, records) for k in TARGETS]
         lines.append(
             f"| {pt['n_particles']} | {pt['phi']:.2f} | {pt['stress']:g} | {pt['n_seeds']} | "
             + " | ".join(cells)
