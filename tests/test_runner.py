@@ -104,6 +104,7 @@ def test_rerunning_a_finished_state_point_leaves_its_file_untouched(tmp_path):
     assert path.read_bytes() == before
     assert (again.status, again.strain, again.steps) == (first.status, first.strain, first.steps)
     assert again.summary["viscosity"] == pytest.approx(first.summary["viscosity"])
+    assert again.already_finished and not first.already_finished
 
 
 def test_files_written_before_a_parameter_existed_resume_with_its_default(tmp_path):

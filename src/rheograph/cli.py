@@ -31,6 +31,9 @@ def simulate_main(cfg: DictConfig) -> dict:
     path = run_dir / cfg.output_file
     log.info("state point %s -> %s", run_name(params), path)
     outcome = run_state_point(params, path, progress=cfg.progress, solver=cfg.solver)
+    if outcome.already_finished:  # a rerun sweep: one line, not the summary again in every finished log
+        log.info("already %s at strain %.3f: nothing to do", outcome.status, outcome.strain)
+        return {"status": outcome.status, "path": str(path), **outcome.summary}
     log.info(
         "status %s after strain %.3f (%d steps, %.1f s)",
         outcome.status,

@@ -35,6 +35,7 @@ class RunOutcome:
     steps: int
     wall_seconds: float
     summary: dict
+    already_finished: bool = False  # read from a finished file: nothing was simulated
 
 
 class _StopFlag:
@@ -109,7 +110,7 @@ def finished_outcome(path: Path, params: SimParams) -> RunOutcome | None:
     if any(k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k] for k in mine):
         return None
     if status == "jammed" or (status == "completed" and strain >= params.strain):
-        return RunOutcome(status, strain, steps, 0.0, summary)
+        return RunOutcome(status, strain, steps, 0.0, summary, already_finished=True)
     return None
 
 
