@@ -115,7 +115,7 @@ def write(results: dict, args) -> None:
 
     lines = [
         "5 folds, "
-        f"{args.epochs} epochs, batch 32 (N = 400) / 8 (N = 2000), default model (graph=physics, "
+        f"{args.epochs} epochs, batch 32 (N = 400) / 8 (N = 2000), default model (graph=physics_solve, "
         "model=resgcn_physics"
         + (", " + " ".join(args.overrides) if args.overrides else "")
         + "); mean ± std over test folds.  Split: grouped = whole trajectories held out (the estimate "

@@ -94,7 +94,7 @@ def main(argv=None) -> None:
 
     lines = [
         f"N = {args.n}, φ = {args.phi:.2f}, {args.split} split (whole trajectories held out), "
-        f"{len(folds)} folds, {args.epochs} epochs, default model (graph=physics, model=resgcn_physics"
+        f"{len(folds)} folds, {args.epochs} epochs, default model (graph=physics_solve, model=resgcn_physics"
         + (", " + " ".join(args.overrides) if args.overrides else "")
         + f"); seeds {args.seeds}.  Mean ± std over the test folds; the ensemble averages the "
         f"{len(args.seeds)} models of each fold (log η_r, log Π in log space).",

@@ -9,7 +9,8 @@ and per-run reports under docs/results/surrogate_study/<variant>_<split>/.
 Variants (config groups of conf/): ``paper`` = graph=paper model=resgcn (the seed paper: geometric edge
 features, softmax aggregation, mean pooling, positions only); ``physics_positions`` = physics-aware edge
 features, positions only; ``physics`` = physics-aware features + imposed stress (graph input and CLM
-load); ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
+load); ``physics_solve`` = ``physics`` + the one-solve viscosity (graph=physics_solve, the default);
+``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
 stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation;
 ``physics_pi_sigma0`` = ``physics`` learning Pi in sigma0 (graph.pressure_per_stress=false) with the
 weights that suited it (2/5/2): ablation of learning Pi in units of the imposed stress;
@@ -39,6 +40,7 @@ VARIANTS = {
     "paper": ["graph=paper", "model=resgcn"],
     "physics_positions": ["graph=physics_positions", "model=resgcn_physics"],
     "physics": ["graph=physics", "model=resgcn_physics"],
+    "physics_solve": ["graph=physics_solve", "model=resgcn_physics"],
     "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
     "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
     "physics_pi_sigma0": [

@@ -689,3 +689,83 @@ def test_history_graphs_read_the_recorded_contacts_and_refuse_files_without_them
         del h5["snapshots/contact_pairs"]
     with pytest.raises(InputError, match="history features"):
         snapshot_graphs(stripped, settings, run_id=0)
+
+
+def test_solve_viscosity_is_the_simulators_step_on_unstretched_springs():
+    """One pass of solve_viscosity on a sheared configuration is the simulator's step restarted from
+    those positions (springs unstretched, dt = disp_max): the same eta_r to round-off.  Two passes
+    re-assume dt as a running simulation would: with frictional contacts present, a different finite
+    value.  A rigid periodic translation changes nothing."""
+    from rheograph.graphs.features import solve_viscosity
+    from rheograph.sim.geometry import wrap_positions
+    from rheograph.sim.integrator import SimState, Simulation
+    from rheograph.sim.params import SimParams
+
+    params = SimParams(n_particles=64, phi=0.78, stress=20.0, integrator="implicit", disp_max=2e-3)
+    sim = Simulation(params)
+    for _ in range(400):
+        sim.step()
+    s = sim.state
+    start = (s.positions.copy(), s.radii, s.lx, s.ly, s.le_offset)
+    restarted = Simulation(params, SimState(start[0].copy(), *start[1:]))
+    result = restarted.step()
+    assert result.n_frictional > 0
+    first = params.stress / result.shear_rate
+    run_params = dataclasses.asdict(params)
+    assert solve_viscosity(*start, run_params, passes=1) == pytest.approx(first, rel=1e-10)
+    two = solve_viscosity(*start, run_params)
+    assert np.isfinite(two) and two > 1.0 and two != pytest.approx(first, rel=1e-6)
+    shifted = start[0] + np.array([0.37 * s.lx, 0.0])  # along the flow: Lees-Edwards images unchanged
+    wrap_positions(shifted, s.lx, s.ly, s.le_offset)
+    assert solve_viscosity(shifted, *start[1:], run_params) == pytest.approx(two, rel=1e-8)
+
+
+def test_solve_viscosity_of_particles_out_of_reach_is_the_solvents():
+    """No pair within the lubrication range: nothing resists but the solvent, eta_r = 1 exactly."""
+    from rheograph.graphs.features import solve_viscosity
+
+    side = 8
+    grid = (np.arange(side) + 0.5) * 5.0  # spacing 5 a: gaps >= 2.2 a, beyond lub_max_gap
+    positions = np.stack(np.meshgrid(grid, grid), axis=-1).reshape(-1, 2)
+    radii = np.where(np.arange(side * side) % 2, 1.4, 1.0)
+    params = {"n_particles": side * side, "phi": 0.1, "stress": 3.0}
+    assert solve_viscosity(positions, radii, 40.0, 40.0, 0.0, params) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files, tmp_path):
+    """graph_inputs with solve_viscosity: every graph carries it (asinh scale of the eta_r target) next
+    to log_stress; an extra trees baseline gets the same column, the issue's trees stay as they were;
+    without log_stress it is refused by name."""
+    from rheograph.errors import InputError
+    from rheograph.graphs.features import solve_viscosity
+    from rheograph.learn.baselines import baseline_predictions, dataset_arrays
+
+    settings = dataclasses.replace(SETTINGS, graph_inputs=("log_stress", "solve_viscosity"))
+    dataset = SnapshotGraphDataset(tiny_files, settings, tmp_path)
+    assert dataset.u.shape == (len(dataset), 2)
+    with h5py.File(tiny_files[2]) as h5:
+        params = json.loads(h5.attrs["params"])
+        sn = h5["snapshots"]
+        k = int(np.flatnonzero(sn["strain"][()] >= settings.min_strain)[0])
+        eta = solve_viscosity(
+            sn["positions"][k], h5["radii"][()], h5.attrs["lx"], h5.attrs["ly"], sn["le_offset"][k], params
+        )
+    graphs = snapshot_graphs(tiny_files[2], settings, 0)
+    assert graphs[0].u[0, 0] == pytest.approx(np.log(params["stress"]))
+    assert graphs[0].u[0, 1] == pytest.approx(np.arcsinh(eta), rel=1e-6)
+    arrays = dataset_arrays(dataset, np.arange(len(dataset)))
+    np.testing.assert_allclose(arrays["solve_viscosity"], dataset.u[:, 1].numpy(), rtol=1e-7)
+    plain = dataset_arrays(SnapshotGraphDataset(tiny_files, SETTINGS, tmp_path), np.arange(len(dataset)))
+    assert "solve_viscosity" not in plain
+    half = np.arange(len(dataset)) % 2 == 0
+    split = [{k: v[m] for k, v in arrays.items()} for m in (half, ~half)]
+    with_solve = baseline_predictions(*split, settings.viscosity_scale, settings.pressure_scale)
+    without = baseline_predictions(
+        *[{k: v[m] for k, v in plain.items()} for m in (half, ~half)],
+        settings.viscosity_scale,
+        settings.pressure_scale,
+    )
+    assert set(with_solve) == set(without) | {"descriptors_solve"}  # the issue's baselines stay as defined
+    np.testing.assert_allclose(with_solve["descriptors"], without["descriptors"])
+    with pytest.raises(InputError, match="solve_viscosity.*log_stress"):
+        GraphSettings(graph_inputs=("solve_viscosity",))

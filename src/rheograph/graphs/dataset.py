@@ -25,6 +25,7 @@ from rheograph.graphs.features import (
     node_features,
     snapshot_descriptors,
     snapshot_edges,
+    solve_viscosity,
 )
 from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.sim.params import SimParams
@@ -39,7 +40,9 @@ class GraphSettings:
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = PAPER_EDGE_FEATURES
-    graph_inputs: tuple = ()  # graph-level inputs (log_stress, phi): known conditions of the snapshot
+    # graph-level inputs: log_stress, phi (known conditions of the snapshot), solve_viscosity (computed
+    # from its positions and the imposed stress; rheograph.graphs.features.solve_viscosity)
+    graph_inputs: tuple = ()
     min_strain: float = 1.0  # snapshots before this strain (start-up transient) are skipped
     viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
     pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
@@ -63,6 +66,11 @@ class GraphSettings:
         for name in ("viscosity_scale", "pressure_scale"):
             if getattr(self, name) <= 0:
                 raise InputError(f"graph.{name} must be > 0")
+        if "solve_viscosity" in self.graph_inputs and "log_stress" not in self.graph_inputs:
+            raise InputError(
+                "graph.graph_inputs: solve_viscosity is computed at the imposed stress, which the model "
+                f"must then be given too: add log_stress (now {list(self.graph_inputs)})"
+            )
         if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
             raise InputError(
                 "graph.pressure_per_stress=true learns Pi in units of the imposed stress, which the model "
@@ -130,9 +138,12 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
             ]
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
     known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
-    u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
     graphs = []
     for k, idx in enumerate(keep):
+        if "solve_viscosity" in settings.graph_inputs:  # one resistance solve per snapshot
+            eta = solve_viscosity(positions[k], radii, lx, ly, offsets[idx], params)
+            known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
+        u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
         edge_index, feats, pairs = snapshot_edges(
             positions[k], radii, lx, ly, offsets[idx], settings.cutoff, params, contacts[k]
         )

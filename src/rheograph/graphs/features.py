@@ -43,6 +43,8 @@ import numpy as np
 
 from rheograph.errors import InputError
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
+from rheograph.sim.integrator import DT_GROWTH, SimState, Simulation
+from rheograph.sim.params import SimParams
 
 PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
 PHYSICS_EDGE_FEATURES = (
@@ -218,8 +220,41 @@ def node_features(radii, size_ratio):
 
 # ---- graph-level inputs ---------------------------------------------------------------------------
 # Known for every snapshot of a run: log(sigma/sigma0), the imposed stress on a log scale (it spans
-# 0.5-200), and phi for models pooled over area fractions.
-GRAPH_INPUTS = ("log_stress", "phi")
+# 0.5-200), and phi for models pooled over area fractions; computed from the snapshot's positions and the
+# imposed stress: solve_viscosity (solve_viscosity() below, on the eta_r target's asinh scale).
+GRAPH_INPUTS = ("log_stress", "phi", "solve_viscosity")
+
+
+def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: int = 2) -> float:
+    """Relative viscosity eta_r [-] of one stress-controlled resistance solve on a snapshot.
+
+    What the simulator's implicit step (rheograph.sim.integrator) computes from the positions (N, 2) [a]
+    and the run's parameters ``params`` (imposed stress, k_n, mu, ...) alone: lubrication from the gaps,
+    normal contact springs from the overlaps, the CLM's frictional contacts from the normal loads, the
+    tangential springs unstretched (their history is not in a snapshot) but the stick contacts resisting
+    through the implicit scheme's stiffness dt k_t — which is what makes a frictional network rigid in
+    one solve.  The shear rate is the one that meets the imposed stress exactly, eta_r = sigma / shear
+    rate.  dt is set as a running simulation sets it: each of ``passes`` solves assumes DT_GROWTH x the dt
+    the previous one would step with (the first, the simulator's start value disp_max).  Measured at
+    phi = 0.70, N = 400 (600 snapshots): its within-state fluctuation correlates with the recorded eta_r
+    at 0.92 after one pass, 0.944 after two, 0.946 after three; with the recorded springs, 0.978.
+    """
+    sim_params = SimParams.from_mapping({**params, "integrator": "implicit"})
+    dt_assumed = 0.0  # Simulation's start value: disp_max
+    for _ in range(passes):
+        state = SimState(
+            positions=np.array(positions, dtype=np.float64),
+            radii=np.asarray(radii, dtype=np.float64),
+            lx=lx,
+            ly=ly,
+            le_offset=le_offset,
+            dt_assumed=dt_assumed,
+        )
+        result = Simulation(sim_params, state).step()
+        dt_assumed = min(DT_GROWTH * result.dt, sim_params.dt_max)
+    if result.shear_rate == 0.0:
+        raise InputError("solve_viscosity: the snapshot's resistance solve gives a zero shear rate")
+    return sim_params.stress / result.shear_rate
 
 
 # ---- target transforms ---------------------------------------------------------------------------

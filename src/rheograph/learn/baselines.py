@@ -5,6 +5,8 @@
 * ``descriptors``: gradient-boosted trees on the eight per-snapshot physics descriptors of
   ``rheograph.graphs.features.DESCRIPTORS`` plus log(sigma/sigma0) (and phi when it varies) — a model
   without message passing.
+* ``descriptors_solve``: the same trees given the one-solve viscosity too, when the network is given it
+  (``graph.graph_inputs`` with solve_viscosity): what that input alone brings, without message passing.
 * ``descriptors_ridge``: ridge regression on the descriptors alone (positions only, the seed paper's
   information).
 
@@ -17,7 +19,7 @@ import numpy as np
 
 from rheograph.learn.module import physical_targets
 
-BASELINES = ("stress_mean", "descriptors", "descriptors_ridge")
+BASELINES = ("stress_mean", "descriptors", "descriptors_ridge", "descriptors_solve")
 
 
 def _state_points(phi: np.ndarray, stress: np.ndarray) -> np.ndarray:
@@ -43,20 +45,23 @@ def stress_mean(train: dict, test: dict) -> np.ndarray:
     return out
 
 
-def _inputs(data: dict, with_conditions: bool, vary_phi: bool) -> np.ndarray:
+def _inputs(data: dict, with_conditions: bool, vary_phi: bool, with_solve: bool = False) -> np.ndarray:
     columns = [data["descriptors"]]
     if with_conditions:
         columns.append(np.log(data["stress"])[:, None])
         if vary_phi:
             columns.append(np.asarray(data["phi"])[:, None])
+    if with_solve:
+        columns.append(np.asarray(data["solve_viscosity"])[:, None])
     return np.concatenate(columns, axis=1)
 
 
-def descriptor_trees(train: dict, test: dict, seed: int = 0) -> np.ndarray:
+def descriptor_trees(train: dict, test: dict, seed: int = 0, with_solve: bool = False) -> np.ndarray:
     from sklearn.ensemble import HistGradientBoostingRegressor
 
     vary_phi = np.unique(np.round(train["phi"], 6)).size > 1
-    x_train, x_test = _inputs(train, True, vary_phi), _inputs(test, True, vary_phi)
+    x_train = _inputs(train, True, vary_phi, with_solve)
+    x_test = _inputs(test, True, vary_phi, with_solve)
     out = np.empty((x_test.shape[0], train["y"].shape[1]))
     for k in range(train["y"].shape[1]):
         model = HistGradientBoostingRegressor(max_iter=300, learning_rate=0.05, random_state=seed)
@@ -83,6 +88,8 @@ def baseline_predictions(train: dict, test: dict, viscosity_scale: float, pressu
         "descriptors": descriptor_trees(train, test),
         "descriptors_ridge": descriptor_ridge(train, test),
     }
+    if "solve_viscosity" in train:
+        raw["descriptors_solve"] = descriptor_trees(train, test, with_solve=True)
     return {name: physical_targets(pred, viscosity_scale, pressure_scale) for name, pred in raw.items()}
 
 
@@ -91,9 +98,13 @@ def dataset_arrays(dataset, index) -> dict:
     import torch
 
     index = torch.as_tensor(np.asarray(index))
-    return {
+    arrays = {
         "y": dataset.y[index].double().numpy(),
         "descriptors": dataset.descriptors[index].numpy(),
         "stress": dataset.stress[index].numpy(),
         "phi": dataset.phi[index].numpy(),
     }
+    inputs = list(dataset.settings.graph_inputs)
+    if "solve_viscosity" in inputs:
+        arrays["solve_viscosity"] = dataset.u[index][:, inputs.index("solve_viscosity")].double().numpy()
+    return arrays

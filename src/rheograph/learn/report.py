@@ -14,6 +14,7 @@ BASELINE_LABELS = {
     "stress_mean": "baseline: mean at (φ, σ)",
     "descriptors": "baseline: descriptors + σ (trees)",
     "descriptors_ridge": "baseline: descriptors, positions only (ridge)",
+    "descriptors_solve": "baseline: descriptors + σ + one-solve η_r (trees)",
 }
 
 
