@@ -169,8 +169,9 @@ def main(argv=None) -> None:
             + " | ".join(cell(folds, f"test/{key}") for key, _ in COLUMNS)
             + f" | {cell(folds, 'test/fluct_eta')} | {minutes:.1f} |"
         )
-        for b in ("stress_mean", "descriptors", "descriptors_ridge"):
-            baselines.setdefault((b, split), folds)
+        for b in ("stress_mean", "descriptors", "descriptors_ridge", "descriptors_solve"):
+            if f"baseline/{b}/r2_log_eta" in folds[0]:  # descriptors_solve: with the one-solve input
+                baselines.setdefault((b, split), folds)
         print(rows[-1], flush=True)
 
     for (b, split), folds in baselines.items():
@@ -186,7 +187,8 @@ def main(argv=None) -> None:
         "(seed paper).  fluct. η_r: correlation of predicted and true deviations of log η_r from the "
         "state-point mean (0 for a model that knows only σ).  Baselines (rheograph.learn.baselines) on the "
         "same folds: stress_mean = training mean at the same (φ, σ); descriptors = gradient-boosted trees "
-        "on eight physics descriptors + log σ; descriptors_ridge = ridge on the descriptors alone.",
+        "on eight physics descriptors + log σ; descriptors_ridge = ridge on the descriptors alone; "
+        "descriptors_solve = the trees given the one-solve η_r too (runs with graph=physics_solve).",
         "",
         "| inputs | split | " + " | ".join(label for _, label in COLUMNS) + " | fluct. η_r | train min |",
         "|---|---|" + "---|" * (len(COLUMNS) + 2),
