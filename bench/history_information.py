@@ -7,9 +7,11 @@ springs' stretches (history the positions do not record).  Gradient-boosted tree
 descriptor baseline) are scored leaving one seed out (whole trajectories held out) on: the eight physics
 descriptors + log σ; the same + five spring descriptors from the stored contact states (the tangential
 spring stress Σ r sym(n ⊗ ξ)_xy per area, its normal-stress difference, Σ |ξ| per area, the sticking and
-sliding fractions); the spring descriptors + log σ alone.  The gain from the springs bounds what any
-positions-only surrogate loses to history.  Writes the ``history_information`` section of
-docs/benchmarks.md.
+sliding fractions); the spring descriptors + log σ alone; and the descriptors + log σ + the one-solve
+η_r (``rheograph.graphs.features.solve_viscosity``: the simulator's resistance solve on the positions at
+σ, springs unstretched — positions and σ only, no history).  The gain from the springs bounds what any
+positions-only surrogate loses to history; the gain from the solve, what the global flow problem holds
+that per-snapshot sums miss.  Writes the ``history_information`` section of docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rheograph.graphs.features import snapshot_descriptors, snapshot_pairs
+from rheograph.graphs.features import snapshot_descriptors, snapshot_pairs, solve_viscosity
 from rheograph.learn.module import r2_score
 from rheograph.sim.geometry import pair_geometry
 
@@ -47,7 +49,8 @@ def spring_descriptors(positions, radii, lx, ly, le_offset, pairs, stretch, stat
 
 
 def snapshot_table(n: int, phi: float, min_strain: float = 1.0) -> dict:
-    rows = {"seed": [], "log_stress": [], "descriptors": [], "springs": [], **{k: [] for k in TARGETS}}
+    rows = {"seed": [], "log_stress": [], "descriptors": [], "springs": [], "solve": []}
+    rows.update({k: [] for k in TARGETS})
     pattern = str(ROOT / f"data/paper/multirun/N{n}_phi{phi:g}_*/trajectory.h5")
     for path in sorted(glob.glob(pattern)):
         with h5py.File(path, "r") as h5:
@@ -74,6 +77,7 @@ def snapshot_table(n: int, phi: float, min_strain: float = 1.0) -> dict:
                         sn["contact_state"][rows_k],
                     )
                 )
+                rows["solve"].append(np.log10(abs(solve_viscosity(positions, radii, lx, ly, le, params))))
                 rows["seed"].append(params["seed"])
                 rows["log_stress"].append(np.log(params["stress"]))
                 for label, key in TARGETS.items():
@@ -105,8 +109,9 @@ def main(argv=None) -> None:
         f"N = {args.n}, snapshots at strain ≥ 1 of the completed runs, R² of gradient-boosted trees "
         "leaving one seed out (whole trajectories held out).",
         "",
-        "| φ | snapshots | target | descriptors + σ | + spring stretches | springs + σ only |",
-        "|---|---|---|---|---|---|",
+        "| φ | snapshots | target | descriptors + σ | + spring stretches | springs + σ only "
+        "| descriptors + σ + one-solve η_r |",
+        "|---|---|---|---|---|---|---|",
     ]
     for phi in args.phi:
         table = snapshot_table(args.n, phi)
@@ -117,6 +122,7 @@ def main(argv=None) -> None:
             "descriptors": np.c_[table["descriptors"], s],
             "with springs": np.c_[table["descriptors"], s, table["springs"]],
             "springs only": np.c_[table["springs"], s],
+            "with solve": np.c_[table["descriptors"], s, table["solve"]],
         }
         for label in TARGETS:
             r2 = [leave_one_seed_out_r2(x, table[label], table["seed"]) for x in inputs.values()]
