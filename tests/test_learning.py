@@ -740,9 +740,12 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
     from rheograph.graphs.features import solve_viscosity
     from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 
-    settings = dataclasses.replace(SETTINGS, graph_inputs=("log_stress", "solve_viscosity"))
+    inputs = ("log_stress", "solve_viscosity", "frictional_coordination")
+    settings = dataclasses.replace(SETTINGS, graph_inputs=inputs)
     dataset = SnapshotGraphDataset(tiny_files, settings, tmp_path)
-    assert dataset.u.shape == (len(dataset), 2)
+    assert dataset.u.shape == (len(dataset), 3)
+    # Z_mu is a count that positions and sigma fix: the computed input equals the recorded target
+    np.testing.assert_allclose(dataset.u[:, 2].numpy(), dataset.y_raw[:, 2].numpy(), atol=1e-6)
     with h5py.File(tiny_files[2]) as h5:
         params = json.loads(h5.attrs["params"])
         sn = h5["snapshots"]
@@ -754,9 +757,9 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
     assert graphs[0].u[0, 0] == pytest.approx(np.log(params["stress"]))
     assert graphs[0].u[0, 1] == pytest.approx(np.arcsinh(eta), rel=1e-6)
     arrays = dataset_arrays(dataset, np.arange(len(dataset)))
-    np.testing.assert_allclose(arrays["solve_viscosity"], dataset.u[:, 1].numpy(), rtol=1e-7)
+    np.testing.assert_allclose(arrays["computed_inputs"], dataset.u[:, 1:].numpy(), rtol=1e-7)
     plain = dataset_arrays(SnapshotGraphDataset(tiny_files, SETTINGS, tmp_path), np.arange(len(dataset)))
-    assert "solve_viscosity" not in plain
+    assert "computed_inputs" not in plain
     half = np.arange(len(dataset)) % 2 == 0
     split = [{k: v[m] for k, v in arrays.items()} for m in (half, ~half)]
     with_solve = baseline_predictions(*split, settings.viscosity_scale, settings.pressure_scale)
@@ -767,5 +770,6 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
     )
     assert set(with_solve) == set(without) | {"descriptors_solve"}  # the baselines stay as defined
     np.testing.assert_allclose(with_solve["descriptors"], without["descriptors"])
-    with pytest.raises(InputError, match="solve_viscosity.*log_stress"):
-        GraphSettings(graph_inputs=("solve_viscosity",))
+    for name in ("solve_viscosity", "frictional_coordination"):
+        with pytest.raises(InputError, match=f"{name}.*log_stress"):
+            GraphSettings(graph_inputs=(name,))

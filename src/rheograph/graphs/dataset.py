@@ -17,6 +17,7 @@ from torch_geometric.data import Data, InMemoryDataset
 from rheograph.analysis import jammed_snapshots
 from rheograph.errors import InputError
 from rheograph.graphs.features import (
+    COMPUTED_GRAPH_INPUTS,
     EDGE_FEATURES,
     GRAPH_INPUTS,
     HISTORY_EDGE_FEATURES,
@@ -40,8 +41,9 @@ class GraphSettings:
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = PAPER_EDGE_FEATURES
-    # graph-level inputs: log_stress, phi (known conditions of the snapshot), solve_viscosity (computed
-    # from its positions and the imposed stress; rheograph.graphs.features.solve_viscosity)
+    # graph-level inputs: log_stress, phi (known conditions of the snapshot), solve_viscosity and
+    # frictional_coordination (computed from its positions and the imposed stress; see
+    # rheograph.graphs.features.GRAPH_INPUTS)
     graph_inputs: tuple = ()
     min_strain: float = 1.0  # snapshots before this strain (start-up transient) are skipped
     viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
@@ -66,9 +68,10 @@ class GraphSettings:
         for name in ("viscosity_scale", "pressure_scale"):
             if getattr(self, name) <= 0:
                 raise InputError(f"graph.{name} must be > 0")
-        if "solve_viscosity" in self.graph_inputs and "log_stress" not in self.graph_inputs:
+        computed = [name for name in self.graph_inputs if name in COMPUTED_GRAPH_INPUTS]
+        if computed and "log_stress" not in self.graph_inputs:
             raise InputError(
-                "graph.graph_inputs: solve_viscosity is computed at the imposed stress, which the model "
+                f"graph.graph_inputs: {computed} are computed at the imposed stress, which the model "
                 f"must then be given too: add log_stress (now {list(self.graph_inputs)})"
             )
         if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
@@ -143,10 +146,11 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
         if "solve_viscosity" in settings.graph_inputs:  # one resistance solve per snapshot
             eta = solve_viscosity(positions[k], radii, lx, ly, offsets[idx], params)
             known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
-        u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
         edge_index, feats, pairs = snapshot_edges(
             positions[k], radii, lx, ly, offsets[idx], settings.cutoff, params, contacts[k]
         )
+        known["frictional_coordination"] = 2.0 * feats["frictional"][: pairs["i"].size].sum() / radii.size
+        u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
         edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
         y = settings.transform_targets(*raw[idx])
         graphs.append(

@@ -220,9 +220,13 @@ def node_features(radii, size_ratio):
 
 # ---- graph-level inputs ---------------------------------------------------------------------------
 # Known for every snapshot of a run: log(sigma/sigma0), the imposed stress on a log scale (it spans
-# 0.5-200), and phi for models pooled over area fractions; computed from the snapshot's positions and the
-# imposed stress: solve_viscosity (solve_viscosity() below, on the eta_r target's asinh scale).
-GRAPH_INPUTS = ("log_stress", "phi", "solve_viscosity")
+# 0.5-200), and phi for models pooled over area fractions.  Computed from the snapshot's positions and the
+# imposed stress (COMPUTED_GRAPH_INPUTS): solve_viscosity (solve_viscosity() below, on the eta_r target's
+# asinh scale) and frictional_coordination, 2 x (pairs whose normal spring force exceeds the critical
+# load) / N — the CLM's frictional contacts counted, i.e. Z_mu itself: with the CLM, Z_mu is a count that
+# positions and sigma fix exactly (tests/test_learning.py), not something to learn.
+COMPUTED_GRAPH_INPUTS = ("solve_viscosity", "frictional_coordination")
+GRAPH_INPUTS = ("log_stress", "phi", *COMPUTED_GRAPH_INPUTS)
 
 
 def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: int = 2) -> float:

@@ -5,8 +5,9 @@
 * ``descriptors``: gradient-boosted trees on the eight per-snapshot physics descriptors of
   ``rheograph.graphs.features.DESCRIPTORS`` plus log(sigma/sigma0) (and phi when it varies) — a model
   without message passing.
-* ``descriptors_solve``: the same trees given the one-solve viscosity too, when the network is given it
-  (``graph.graph_inputs`` with solve_viscosity): what that input alone brings, without message passing.
+* ``descriptors_solve``: the same trees given the computed graph inputs too, when the network is given
+  them (``graph.graph_inputs`` with solve_viscosity, frictional_coordination): what they bring without
+  message passing.
 * ``descriptors_ridge``: ridge regression on the descriptors alone (positions only, the seed paper's
   information).
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rheograph.graphs.features import COMPUTED_GRAPH_INPUTS
 from rheograph.learn.module import physical_targets
 
 BASELINES = ("stress_mean", "descriptors", "descriptors_ridge", "descriptors_solve")
@@ -52,7 +54,7 @@ def _inputs(data: dict, with_conditions: bool, vary_phi: bool, with_solve: bool 
         if vary_phi:
             columns.append(np.asarray(data["phi"])[:, None])
     if with_solve:
-        columns.append(np.asarray(data["solve_viscosity"])[:, None])
+        columns.append(np.asarray(data["computed_inputs"]))
     return np.concatenate(columns, axis=1)
 
 
@@ -88,7 +90,7 @@ def baseline_predictions(train: dict, test: dict, viscosity_scale: float, pressu
         "descriptors": descriptor_trees(train, test),
         "descriptors_ridge": descriptor_ridge(train, test),
     }
-    if "solve_viscosity" in train:
+    if "computed_inputs" in train:
         raw["descriptors_solve"] = descriptor_trees(train, test, with_solve=True)
     return {name: physical_targets(pred, viscosity_scale, pressure_scale) for name, pred in raw.items()}
 
@@ -105,6 +107,7 @@ def dataset_arrays(dataset, index) -> dict:
         "phi": dataset.phi[index].numpy(),
     }
     inputs = list(dataset.settings.graph_inputs)
-    if "solve_viscosity" in inputs:
-        arrays["solve_viscosity"] = dataset.u[index][:, inputs.index("solve_viscosity")].double().numpy()
+    computed = [inputs.index(name) for name in inputs if name in COMPUTED_GRAPH_INPUTS]
+    if computed:  # the graph inputs computed from positions and sigma, (G, k)
+        arrays["computed_inputs"] = dataset.u[index][:, computed].double().numpy()
     return arrays
