@@ -175,8 +175,9 @@ def write(results: dict, args) -> None:
         axes[k].set_ylabel(f"R² {label}")
     axes[0].legend(fontsize=7)
     fig.tight_layout()
-    (ROOT / "docs" / "figures").mkdir(parents=True, exist_ok=True)
-    fig.savefig(ROOT / "docs" / "figures" / "surrogate_r2_vs_phi.png", dpi=110)
+    if not args.no_write:  # --no-write leaves docs/ as it is, the figure included
+        (ROOT / "docs" / "figures").mkdir(parents=True, exist_ok=True)
+        fig.savefig(ROOT / "docs" / "figures" / "surrogate_r2_vs_phi.png", dpi=110)
     if any(stale for _, _, stale in results.values()):
         lines += [
             "",
