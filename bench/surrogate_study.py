@@ -188,7 +188,8 @@ def main(argv=None) -> None:
         "state-point mean (0 for a model that knows only σ).  Baselines (rheograph.learn.baselines) on the "
         "same folds: stress_mean = training mean at the same (φ, σ); descriptors = gradient-boosted trees "
         "on eight physics descriptors + log σ; descriptors_ridge = ridge on the descriptors alone; "
-        "descriptors_solve = the trees given the one-solve η_r too (runs with graph=physics_solve).",
+        "descriptors_solve = the trees given the one-solve η_r and the counted Z_μ too "
+        "(graph=physics_solve).",
         "",
         "| inputs | split | " + " | ".join(label for _, label in COLUMNS) + " | fluct. η_r | train min |",
         "|---|---|" + "---|" * (len(COLUMNS) + 2),
