@@ -78,6 +78,13 @@ def train_main(cfg: DictConfig) -> float:
         summary.get("baseline/descriptors/r2_log_pressure", float("nan")),
         summary.get("baseline/descriptors/r2_z_mu", float("nan")),
     )
+    if "baseline/descriptors_solve/r2_log_eta" in summary:
+        log.info(
+            "trees given the same computed inputs (one-solve η_r, counted Z_μ): %.3f, %.3f, %.3f",
+            summary["baseline/descriptors_solve/r2_log_eta"],
+            summary["baseline/descriptors_solve/r2_log_pressure"],
+            summary["baseline/descriptors_solve/r2_z_mu"],
+        )
     log.info("report: %s (all metrics: metrics.json)", run_dir / "report.md")
     return summary["val/loss"]
 
