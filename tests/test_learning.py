@@ -578,7 +578,7 @@ def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_f
     spread = {}
     for per_stress in (False, True):
         module = SurrogateModule(edge_in=6, global_in=1, pressure_per_stress=per_stress).eval()
-        module.fit_target_scaling(batch.y, batch.stress)
+        module.fit_target_scaling(batch.y, batch.stress, batch.u)
         spread[per_stress] = float(module.target_std[1])
         module._net = lambda b: torch.zeros(b.num_graphs, 3)  # the standardised mean
         pressure = inverse_transform(module(batch)[:, 1].double().numpy(), settings.pressure_scale)
@@ -773,3 +773,22 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
     for name in ("solve_viscosity", "frictional_coordination"):
         with pytest.raises(InputError, match=f"{name}.*log_stress"):
             GraphSettings(graph_inputs=(name,))
+
+
+def test_z_mu_on_count_learns_the_correction_and_predicts_the_count_from_a_zero_output(tiny_files):
+    """graph.z_mu_on_count: the learned Z_mu target is Z_mu minus the counted frictional coordination
+    (zero here: the count is Z_mu), a network output of zero correction predicts the count; refused
+    without the count among the graph inputs."""
+    from rheograph.errors import InputError
+    from rheograph.learn.module import SurrogateModule
+
+    inputs = ("log_stress", "frictional_coordination")
+    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, z_mu_on_count=True)
+    batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
+    module = SurrogateModule(edge_in=6, global_in=2, z_mu_input=1).eval()
+    module.fit_target_scaling(batch.y, batch.stress, batch.u)
+    assert abs(float(module.target_mean[2])) < 1e-6  # Z_mu - count = 0 for every snapshot
+    module._net = lambda b: torch.zeros(b.num_graphs, 3)
+    torch.testing.assert_close(module(batch)[:, 2].float(), batch.u[:, 1], atol=1e-5, rtol=0)
+    with pytest.raises(InputError, match="frictional_coordination"):
+        GraphSettings(graph_inputs=("log_stress",), z_mu_on_count=True)

@@ -50,6 +50,8 @@ class GraphSettings:
     pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
     # the model learns Pi in units of the imposed stress (SurrogateModule): needs log_stress as an input
     pressure_per_stress: bool = False
+    # the model learns Z_mu as a correction to the counted frictional_coordination (a graph input)
+    z_mu_on_count: bool = False
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -73,6 +75,11 @@ class GraphSettings:
             raise InputError(
                 f"graph.graph_inputs: {computed} are computed at the imposed stress, which the model "
                 f"must then be given too: add log_stress (now {list(self.graph_inputs)})"
+            )
+        if self.z_mu_on_count and "frictional_coordination" not in self.graph_inputs:
+            raise InputError(
+                "graph.z_mu_on_count=true learns Z_mu as a correction to the counted frictional contacts: "
+                f"add frictional_coordination to graph.graph_inputs (now {list(self.graph_inputs)})"
             )
         if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
             raise InputError(
@@ -193,8 +200,12 @@ class SnapshotGraphDataset(InMemoryDataset):
         self.settings = settings
         key = json.dumps(
             {
-                # pressure_per_stress only says how the model reads the targets: same graphs
-                "settings": {k: v for k, v in asdict(settings).items() if k != "pressure_per_stress"},
+                # how the model reads the targets, not the graphs: left out of the cache key
+                "settings": {
+                    k: v
+                    for k, v in asdict(settings).items()
+                    if k not in ("pressure_per_stress", "z_mu_on_count")
+                },
                 "files": _files_fingerprint(self.files),
                 "schema": SCHEMA_VERSION,
                 "version": 3,  # 3: jammed per snapshot (after the flow stopped), kept at any strain

@@ -132,6 +132,10 @@ class SurrogateModule(L.LightningModule):
     imposed stress dominate the standardised Pi target, so a snapshot's own fluctuation and a few per cent
     of bias at one state point weigh almost nothing in the loss.  Needs sigma known at prediction time
     (``log_stress`` among the graph inputs).
+
+    With ``z_mu_input`` >= 0 (the column of the graph inputs u holding the counted frictional
+    coordination) the network learns Z_mu minus that count: with the CLM the count is Z_mu itself, so the
+    network only has to learn (close to) nothing instead of copying an input through its head.
     """
 
     def __init__(
@@ -158,6 +162,7 @@ class SurrogateModule(L.LightningModule):
         viscosity_scale: float = 1.0,
         pressure_scale: float = 0.1,
         pressure_per_stress: bool = False,
+        z_mu_input: int = -1,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -191,14 +196,17 @@ class SurrogateModule(L.LightningModule):
         self.huber = nn.SmoothL1Loss(beta=huber_beta, reduction="none")
         self._outputs = {"train": [], "val": [], "test": []}
 
-    def _learned(self, y: torch.Tensor, stress: torch.Tensor) -> torch.Tensor:
+    def _learned(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """Transformed targets (G, 3) -> the space the network learns in (before standardisation)."""
-        return pressure_in_stress_units(y, stress) if self.hparams.pressure_per_stress else y
+        out = pressure_in_stress_units(y, stress) if self.hparams.pressure_per_stress else y.clone()
+        if self.hparams.z_mu_input >= 0:
+            out[:, 2] = out[:, 2] - u[:, self.hparams.z_mu_input].to(out.dtype)
+        return out
 
-    def fit_target_scaling(self, y: torch.Tensor, stress: torch.Tensor) -> None:
+    def fit_target_scaling(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> None:
         """Standardisation of the learned targets, from the training graphs' transformed targets
-        ``y`` (G, 3) and imposed stresses ``stress`` (G,)."""
-        learned = self._learned(y.double(), stress.double())
+        ``y`` (G, 3), imposed stresses ``stress`` (G,) and graph inputs ``u`` (G, global_in)."""
+        learned = self._learned(y.double(), stress.double(), u.double())
         self.target_mean.copy_(learned.mean(dim=0))
         self.target_std.copy_(learned.std(dim=0).clamp_min(1e-6))
 
@@ -209,7 +217,10 @@ class SurrogateModule(L.LightningModule):
         """Standardised network output (G, 3) -> transformed targets (Pi in sigma0)."""
         learned = z * self.target_std + self.target_mean
         if self.hparams.pressure_per_stress:
-            return pressure_in_sigma0(learned, batch.stress.view(-1))
+            learned = pressure_in_sigma0(learned, batch.stress.view(-1))
+        if self.hparams.z_mu_input >= 0:
+            learned = learned.clone()
+            learned[:, 2] = learned[:, 2] + batch.u[:, self.hparams.z_mu_input].to(learned.dtype)
         return learned
 
     def forward(self, batch) -> torch.Tensor:
@@ -218,7 +229,7 @@ class SurrogateModule(L.LightningModule):
 
     def _step(self, batch, stage: str):
         z = self._net(batch)
-        target = (self._learned(batch.y, batch.stress.view(-1)) - self.target_mean) / self.target_std
+        target = (self._learned(batch.y, batch.stress.view(-1), batch.u) - self.target_mean) / self.target_std
         # a shear-jammed run has no viscosity (its apparent eta_r diverges): its snapshots train Pi and
         # Z_mu (the loaded static packing) but never eta_r
         scored = torch.ones_like(target)

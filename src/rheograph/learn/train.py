@@ -105,10 +105,11 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         viscosity_scale=settings.viscosity_scale,
         pressure_scale=settings.pressure_scale,
         pressure_per_stress=settings.pressure_per_stress,
+        z_mu_input=(settings.graph_inputs.index("frictional_coordination") if settings.z_mu_on_count else -1),
         _convert_="all",
     )
     train = torch.as_tensor(dm.train_idx)
-    module.fit_target_scaling(dm.dataset.y[train], dm.dataset.stress[train])
+    module.fit_target_scaling(dm.dataset.y[train], dm.dataset.stress[train], dm.dataset.u[train])
     module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
     return dm, module
 
@@ -263,7 +264,11 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     return summary
 
 
-NEUTRAL_LATER_OPTIONS = (("data", "train_fraction", 1.0), ("model", "global_mixing", "none"))
+NEUTRAL_LATER_OPTIONS = (
+    ("data", "train_fraction", 1.0),
+    ("model", "global_mixing", "none"),
+    ("graph", "z_mu_on_count", False),
+)
 
 
 def config_fingerprint(cfg: DictConfig) -> str:
