@@ -21,8 +21,6 @@ import numpy as np
 from rheograph.graphs.features import COMPUTED_GRAPH_INPUTS
 from rheograph.learn.module import physical_targets
 
-BASELINES = ("stress_mean", "descriptors", "descriptors_ridge", "descriptors_solve")
-
 
 def _state_points(phi: np.ndarray, stress: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(phi, dtype=np.float64), 6) * 1e6 + np.round(np.asarray(stress), 6)
