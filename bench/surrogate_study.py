@@ -52,7 +52,7 @@ VARIANTS = {
     # the best trial of each input variant's Optuna study (bench/tune_report.py), with its batch size
     **{
         f"{v}_tuned": [f"experiment={v}_phi076_best"]
-        for v in ("physics", "paper", "physics_positions")
+        for v in ("physics", "paper", "physics_positions", "physics_solve")
         if (ROOT / "conf" / "experiment" / f"{v}_phi076_best.yaml").exists()  # once its study has run
     },
 }

@@ -792,3 +792,54 @@ def test_z_mu_on_count_learns_the_correction_and_predicts_the_count_from_a_zero_
     torch.testing.assert_close(module(batch)[:, 2].float(), batch.u[:, 1], atol=1e-5, rtol=0)
     with pytest.raises(InputError, match="frictional_coordination"):
         GraphSettings(graph_inputs=("log_stress",), z_mu_on_count=True)
+
+
+def test_viscosity_on_solve_learns_the_correction_to_the_one_solve_viscosity(tiny_files):
+    """graph.viscosity_on_solve: the learned eta_r target is the transformed eta_r minus the transformed
+    one-solve viscosity; a network output of zero correction (the learned mean) predicts the solve
+    shifted by the training mean correction, so a target equal to the solve plus a constant is learned
+    exactly; refused without solve_viscosity among the graph inputs."""
+    from rheograph.errors import InputError
+    from rheograph.learn.module import SurrogateModule
+
+    inputs = ("log_stress", "solve_viscosity")
+    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, viscosity_on_solve=True)
+    batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
+    module = SurrogateModule(edge_in=6, global_in=2, viscosity_input=1).eval()
+    correction = (batch.y[:, 0] - batch.u[:, 1]).double()
+    assert float(correction.std()) > 0  # the recorded eta_r is not the one-solve value: a real target
+    module.fit_target_scaling(batch.y, batch.stress, batch.u)
+    assert float(module.target_mean[0]) == pytest.approx(float(correction.mean()), abs=1e-6)
+    # a network that outputs the standardised true correction reproduces the transformed eta_r
+    z = torch.zeros(batch.num_graphs, 3)
+    z[:, 0] = ((correction - module.target_mean[0]) / module.target_std[0]).float()
+    module._net = lambda b: z
+    torch.testing.assert_close(module(batch)[:, 0].float(), batch.y[:, 0], atol=1e-5, rtol=0)
+    with pytest.raises(InputError, match="solve_viscosity"):
+        GraphSettings(graph_inputs=("log_stress",), viscosity_on_solve=True)
+
+
+def test_target_loss_compares_models_that_learn_in_different_spaces(tiny_files):
+    """The search's objective (val/target_loss) scores the predicted transformed targets against the
+    true ones in units of their training spread: the same predictions score the same whether the
+    network learns the targets, Pi per sigma, or corrections to the computed inputs; and it equals the
+    training loss's unweighted per-target sum when the network learns the targets themselves."""
+    from rheograph.learn.module import SurrogateModule
+
+    inputs = ("log_stress", "solve_viscosity", "frictional_coordination")
+    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs)
+    batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
+    plain = SurrogateModule(edge_in=6, global_in=3)
+    corrected = SurrogateModule(
+        edge_in=6, global_in=3, viscosity_input=1, z_mu_input=2, pressure_per_stress=True
+    )
+    pred = batch.y + torch.tensor([0.05, -0.1, 0.2])
+    scored = torch.ones_like(pred)
+    losses = []
+    for module in (plain, corrected):
+        module.fit_target_scaling(batch.y, batch.stress, batch.u)
+        losses.append(float(module.target_loss(pred, batch.y, scored)))
+    assert losses[0] == pytest.approx(losses[1], rel=1e-6) and losses[0] > 0
+    z = (plain._learned(pred, batch.stress, batch.u) - plain.target_mean) / plain.target_std
+    target = (plain._learned(batch.y, batch.stress, batch.u) - plain.target_mean) / plain.target_std
+    assert losses[0] == pytest.approx(float(plain.huber(z, target).mean(dim=0).sum()), rel=1e-5)

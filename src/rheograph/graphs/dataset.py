@@ -52,6 +52,8 @@ class GraphSettings:
     pressure_per_stress: bool = False
     # the model learns Z_mu as a correction to the counted frictional_coordination (a graph input)
     z_mu_on_count: bool = False
+    # the model learns eta_r as a correction to the one-solve viscosity solve_viscosity (a graph input)
+    viscosity_on_solve: bool = False
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -80,6 +82,11 @@ class GraphSettings:
             raise InputError(
                 "graph.z_mu_on_count=true learns Z_mu as a correction to the counted frictional contacts: "
                 f"add frictional_coordination to graph.graph_inputs (now {list(self.graph_inputs)})"
+            )
+        if self.viscosity_on_solve and "solve_viscosity" not in self.graph_inputs:
+            raise InputError(
+                "graph.viscosity_on_solve=true learns eta_r as a correction to the one-solve viscosity: "
+                f"add solve_viscosity to graph.graph_inputs (now {list(self.graph_inputs)})"
             )
         if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
             raise InputError(
@@ -204,7 +211,7 @@ class SnapshotGraphDataset(InMemoryDataset):
                 "settings": {
                     k: v
                     for k, v in asdict(settings).items()
-                    if k not in ("pressure_per_stress", "z_mu_on_count")
+                    if k not in ("pressure_per_stress", "z_mu_on_count", "viscosity_on_solve")
                 },
                 "files": _files_fingerprint(self.files),
                 "schema": SCHEMA_VERSION,

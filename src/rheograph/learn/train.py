@@ -106,6 +106,9 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         pressure_scale=settings.pressure_scale,
         pressure_per_stress=settings.pressure_per_stress,
         z_mu_input=(settings.graph_inputs.index("frictional_coordination") if settings.z_mu_on_count else -1),
+        viscosity_input=(
+            settings.graph_inputs.index("solve_viscosity") if settings.viscosity_on_solve else -1
+        ),
         _convert_="all",
     )
     train = torch.as_tensor(dm.train_idx)
@@ -268,6 +271,7 @@ NEUTRAL_LATER_OPTIONS = (
     ("data", "train_fraction", 1.0),
     ("model", "global_mixing", "none"),
     ("graph", "z_mu_on_count", False),
+    ("graph", "viscosity_on_solve", False),
 )
 
 

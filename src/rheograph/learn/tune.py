@@ -4,8 +4,9 @@ Each trial composes ``conf/train.yaml`` with the fixed ``train_overrides`` and t
 calls :func:`rheograph.learn.train.train_folds` (the function behind ``train.py``) on the folds the
 training config selects (``fold``: all, one, or a list).  The objective is the mean over those folds of
 the best epoch's ``tune.metric`` (default ``val/target_loss``: the unweighted sum of the per-target
-validation losses, comparable between trials whatever their ``loss_weights``; with ``data.split=grouped``
-a loss on held-out trajectories).  It is reported after every epoch, so that the MedianPruner stops
+Huber losses of the transformed targets in units of their training spread, comparable between trials
+whatever their ``loss_weights`` and whatever space the network learns in; with ``data.split=grouped`` a
+loss on held-out trajectories).  It is reported after every epoch, so that the MedianPruner stops
 hopeless trials within their first fold.  A trial that raises (diverged loss, bad sample, ...) is
 recorded as FAIL and the study goes on; a trial whose process was killed is found by its missing
 heartbeat, failed and retried.  The study lives in an RDB storage (SQLite by default), so a second
