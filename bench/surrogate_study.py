@@ -9,7 +9,9 @@ and per-run reports under docs/results/surrogate_study/<variant>_<split>/.
 Variants (config groups of conf/): ``paper`` = graph=paper model=resgcn (the seed paper: geometric edge
 features, softmax aggregation, mean pooling, positions only); ``physics_positions`` = physics-aware edge
 features, positions only; ``physics`` = physics-aware features + imposed stress (graph input and CLM
-load); ``physics_solve`` = ``physics`` + the one-solve viscosity (graph=physics_solve, the default);
+load); ``physics_solve`` = ``physics`` + the one-solve viscosity and the counted Z_μ, both targets learned
+as corrections to them (graph=physics_solve, the default); ``physics_solve_uncorrected`` = the same inputs
+read through the head (the default of session 11);
 ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
 stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation;
 ``physics_pi_sigma0`` = ``physics`` learning Pi in sigma0 (graph.pressure_per_stress=false) with the
@@ -41,6 +43,13 @@ VARIANTS = {
     "physics_positions": ["graph=physics_positions", "model=resgcn_physics"],
     "physics": ["graph=physics", "model=resgcn_physics"],
     "physics_solve": ["graph=physics_solve", "model=resgcn_physics"],
+    # the default inputs as they were before the corrections became default (session 11)
+    "physics_solve_uncorrected": [
+        "graph=physics_solve",
+        "model=resgcn_physics",
+        "graph.viscosity_on_solve=false",
+        "graph.z_mu_on_count=false",
+    ],
     "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
     "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
     "physics_pi_sigma0": [
