@@ -116,18 +116,26 @@ def test_every_surrogate_study_variant_composes_valid_graph_settings():
 
 
 def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
-    """Runs trained before data.train_fraction / model.global_mixing existed keep their fingerprint (they
-    resume and report as before); setting either option changes it."""
+    """Runs trained before an option existed (data.train_fraction, model.global_mixing, the graph's
+    corrections) keep their fingerprint at its neutral value (they resume and report as before); any
+    other value changes it — also the corrections' non-neutral default of graph=physics_solve."""
     from rheograph.learn.train import NEUTRAL_LATER_OPTIONS, config_fingerprint
 
+    neutral = [f"{group}.{key}={str(value).lower()}" for group, key, value in NEUTRAL_LATER_OPTIONS]
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="train", overrides=["~logger"])
+        cfg = compose(config_name="train", overrides=["~logger", *neutral])
     current = config_fingerprint(cfg)
     earlier = OmegaConf.to_container(cfg)
     for group, key, _ in NEUTRAL_LATER_OPTIONS:
         earlier[group].pop(key)
     assert config_fingerprint(OmegaConf.create(earlier)) == current
-    for override in ("data.train_fraction=0.5", "model.global_mixing=virtual_node"):
+    for override in (
+        "data.train_fraction=0.5",
+        "model.global_mixing=virtual_node",
+        "graph.z_mu_on_count=true",
+        "graph.viscosity_on_solve=true",
+    ):
+        changed_overrides = ["~logger", *[o for o in neutral if o.split("=")[0] != override.split("=")[0]]]
         with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-            changed = compose(config_name="train", overrides=["~logger", override])
+            changed = compose(config_name="train", overrides=[*changed_overrides, override])
         assert config_fingerprint(changed) != current, override

@@ -296,9 +296,10 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["split"] == "random"
     # the learnable signal: the three stresses give very different eta_r, Pi, Z_mu.  Predicting the
-    # training mean costs ~0.4-0.5 per standardised target (~1.3 summed); a model that learned the
-    # stress dependence from the structure gets far below that
-    assert summary["val/loss"] < 0.35, summary
+    # training mean costs ~0.4-0.5 per target in units of its spread (~1.3 summed); a model that learned
+    # the stress dependence from the structure gets far below that.  target_loss, not the training loss:
+    # the default learns eta_r and Z_mu as corrections to computed inputs, whose own spread is small
+    assert summary["test/target_loss"] < 0.35, summary
     assert (run_dir / "report.md").exists() and (run_dir / "parity.png").exists()
     # checkpoint -> predict round trip: the bundle reproduces the in-training test predictions
     saved = np.load(run_dir / "test_predictions.npz")
