@@ -18,6 +18,7 @@ import math
 import time as wallclock
 from collections import defaultdict
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -108,6 +109,35 @@ def _transfer_contacts(old_i, old_j, old_stretch, old_state, new_i, new_j, n):
     return new_stretch, new_state
 
 
+class LinearProblem(NamedTuple):
+    """One step's pair geometry, contact classification and linear system (``linear_problem``).
+
+    Per listed pair (P rows): unit normal i -> j ``nvec`` (P, 2), distance ``r`` [a], reduced gap ``xi``,
+    minimum-image y-separation ``dy`` [a], lubrication coefficients ``coeff`` (P, 36), the masks
+    ``lubricated`` / ``in_contact`` / ``active``, dt times the implicit spring stiffnesses ``k_normal``,
+    ``k_tangential``, the spring force on i ``f_on_i`` (P, 2) [F_CL].  The system: matrix ``data`` on the
+    upper-triangle pattern, right-hand sides ``rhs`` (2, 3N) (row 0 springs, row 1 unit-rate affine flow).
+    Counts: interacting pairs, contacts, frictional contacts.
+    """
+
+    nvec: np.ndarray
+    r: np.ndarray
+    xi: np.ndarray
+    dy: np.ndarray
+    coeff: np.ndarray
+    lubricated: np.ndarray
+    in_contact: np.ndarray
+    active: np.ndarray
+    k_normal: np.ndarray
+    k_tangential: np.ndarray
+    f_on_i: np.ndarray
+    data: np.ndarray
+    rhs: np.ndarray
+    n_active: int
+    n_contacts: int
+    n_frictional: int
+
+
 @njit(cache=True)
 def linear_problem(
     positions,
@@ -137,12 +167,9 @@ def linear_problem(
     Geometry of the listed pairs, the CLM update of ``stretch`` (P, 2) and ``contact_state`` (P,) in
     place, the lubrication coefficients, the resistance matrix data on the pattern (indptr, pair_slot,
     diag_slot, nnz of ``build_pattern``) and the two right-hand sides as rows of ``rhs`` (2, 3N): row 0
-    the contact-spring forces (rate-independent), row 1 the affine flow at unit shear rate.
-    ``dt_implicit`` > 0 puts dt_implicit * spring stiffness into the contact blocks (linearly implicit
-    springs); 0 for explicit Euler.
-
-    Returns (nvec, r, xi, dy, coeff, lubricated, in_contact, active, k_normal, k_tangential, data, rhs,
-    f_on_i, n_active, n_contacts, n_frictional); per pair (P, ...), counts as int.
+    the contact-spring forces (rate-independent), row 1 the affine flow at unit shear rate; returned as a
+    ``LinearProblem``.  ``dt_implicit`` > 0 puts dt_implicit * spring stiffness into the contact blocks
+    (linearly implicit springs); 0 for explicit Euler.
     """
     nvec, r, xi, dy = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, le_offset)
     n_frictional = contacts.critical_load_update(
@@ -190,24 +217,10 @@ def linear_problem(
     f_on_i = contacts.contact_spring_forces(
         radii, pair_i, pair_j, nvec, xi, stretch, contact_state, kn, kt, rhs[0]
     )
-    return (
-        nvec,
-        r,
-        xi,
-        dy,
-        coeff,
-        lubricated,
-        in_contact,
-        active,
-        k_normal,
-        k_tangential,
-        data,
-        rhs,
-        f_on_i,
-        n_active,
-        n_contacts,
-        n_frictional,
-    )
+    return LinearProblem(
+        nvec, r, xi, dy, coeff, lubricated, in_contact, active, k_normal, k_tangential, f_on_i, data, rhs,
+        n_active, n_contacts, n_frictional,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -344,24 +357,7 @@ class Simulation:
         t1 = clock()
         timings["neighbours"] += t1 - t0
         radii = s.radii
-        (
-            nvec,
-            r,
-            xi,
-            dy,
-            coeff,
-            lubricated,
-            in_contact,
-            active,
-            k_normal,
-            k_tangential,
-            data,
-            rhs,
-            f_on_i,
-            n_active,
-            n_contacts,
-            n_frictional,
-        ) = linear_problem(
+        lp = linear_problem(
             s.positions,
             radii,
             s.pair_i,
@@ -383,11 +379,13 @@ class Simulation:
             self.diag_slot,
             self.indices.shape[0],
         )
-        rhs = rhs.T  # (3N, 2), contiguous columns: both right-hand sides solved in one pass over the factor
+        nvec, r, xi, dy, in_contact = lp.nvec, lp.r, lp.xi, lp.dy, lp.in_contact
+        # (3N, 2) with contiguous columns: both right-hand sides solved in one pass over the factor
+        rhs = lp.rhs.T
         t2 = clock()
         timings["assembly"] += t2 - t1
-        if n_active:
-            self.solver.factorize(data)
+        if lp.n_active:
+            self.solver.factorize(lp.data)
             t3 = clock()
             timings["factorisation"] += t3 - t2
             vels = self.solver.solve(rhs)
@@ -399,11 +397,11 @@ class Simulation:
         timings["solve"] += t4 - t3
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
-        geometry = (radii, s.pair_i, s.pair_j, nvec, r, dy, coeff, lubricated, in_contact)
+        geometry = (radii, s.pair_i, s.pair_j, nvec, r, dy, lp.coeff, lp.lubricated, in_contact)
         lub0, dash0, lub1, dash1 = pair_stress_sums(
-            vel_const, vel_rate, *geometry, k_normal, k_tangential, record
+            vel_const, vel_rate, *geometry, lp.k_normal, lp.k_tangential, record
         )
-        spring = spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, record)
+        spring = spring_stress(s.pair_i, nvec, r, lp.f_on_i, s.contact_state, record)
         f = self.stress_factor
         solvent_unit = np.array([0.0, 1.0, 0.0])  # 2 eta0 E at unit rate, in sigma0
         s0_xy = f * (lub0[1] + dash0[1] + spring[1])
@@ -416,7 +414,7 @@ class Simulation:
         # adaptive step: no particle, pair separation, contact point or strain increment may move more
         # than disp_max (physics.md §3.4; LF_DEM also limits the normal approach speed of pairs)
         interaction_speed = contacts.max_interaction_speed(
-            vel, radii, s.pair_i, s.pair_j, nvec, dy, active, s.contact_state, shear_rate
+            vel, radii, s.pair_i, s.pair_j, nvec, dy, lp.active, s.contact_state, shear_rate
         )
         if p.lagged_step_control:
             # LF_DEM (commit 00fa7cc) updates the contact sliding speeds only after the move, so its dt
@@ -436,8 +434,8 @@ class Simulation:
         result = StepResult(
             dt=dt,
             shear_rate=shear_rate,
-            n_contacts=n_contacts,
-            n_frictional=n_frictional,
+            n_contacts=lp.n_contacts,
+            n_frictional=lp.n_frictional,
         )
         if record:
             if xi.shape[0]:  # monitoring only: computed where it is recorded
