@@ -131,3 +131,56 @@ def test_lagged_step_control_bounds_dt_by_the_previous_steps_pair_speeds():
     default = small_sim(disp_max=2e-3)
     advance(default, 50)
     assert default.state.previous_interaction_speed == -1.0  # untouched by the default rule
+
+
+def test_linear_problem_equals_the_separate_kernels():
+    """The fused pre-solve kernel is a composition, not new physics: every output must equal, bit for bit,
+    what the individual kernels give (geometry, CLM update, masks, lubrication, implicit stiffness, matrix,
+    right-hand sides) on a dense frictional state with contacts of every kind."""
+    from rheograph.sim import contacts
+    from rheograph.sim.integrator import linear_problem
+
+    params = SimParams(n_particles=100, phi=0.78, stress=20.0, integrator="implicit", disp_max=2e-3)
+    sim = Simulation(params)
+    for _ in range(300):
+        sim.step()
+    s, p = sim.state, params
+    stretch, state = s.stretch.copy(), s.contact_state.copy()
+    dt = 1.3e-3
+    lp = linear_problem(
+        s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, stretch, state, p.kn, p.kt,
+        p.mu, p.critical_load, p.lub_max_gap, p.delta, dt, sim.indptr, sim.pair_slot, sim.diag_slot,
+        sim.indices.shape[0],
+    )  # fmt: skip
+    ref_stretch, ref_state = s.stretch.copy(), s.contact_state.copy()
+    nvec, r, xi, dy = pair_geometry(s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset)
+    n_frictional = contacts.critical_load_update(
+        s.radii, s.pair_i, s.pair_j, nvec, xi, ref_stretch, ref_state, p.kn, p.kt, p.mu, p.critical_load
+    )
+    in_contact = xi <= 0.0
+    lubricated = (xi > 0.0) & (xi < p.lub_max_gap)
+    active = in_contact | lubricated
+    abar = 0.5 * (s.radii[s.pair_i] + s.radii[s.pair_j])
+    k_normal = np.where(in_contact, p.kn * abar * dt, 0.0)
+    k_tangential = np.where(ref_state == contacts.STICK, p.kt * abar * dt, 0.0)
+    coeff = lubrication_resistance(s.radii, s.pair_i, s.pair_j, xi, active, p.delta)
+    data, rhs_rate = assemble_resistance(
+        s.radii, s.pair_i, s.pair_j, nvec, dy, coeff, active, in_contact, k_normal, k_tangential,
+        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
+    )  # fmt: skip
+    springs = np.zeros(3 * p.n_particles)
+    f_on_i = contacts.contact_spring_forces(
+        s.radii, s.pair_i, s.pair_j, nvec, xi, ref_stretch, ref_state, p.kn, p.kt, springs
+    )
+    # the state must exercise every branch: contacts, sticking contacts, lubricated gaps
+    assert in_contact.sum() > 10 and (ref_state == contacts.STICK).any() and lubricated.any()
+    np.testing.assert_array_equal(stretch, ref_stretch)
+    np.testing.assert_array_equal(state, ref_state)
+    for got, want in [
+        (lp.nvec, nvec), (lp.r, r), (lp.xi, xi), (lp.dy, dy), (lp.coeff, coeff),
+        (lp.lubricated, lubricated), (lp.in_contact, in_contact), (lp.active, active),
+        (lp.k_normal, k_normal), (lp.k_tangential, k_tangential), (lp.f_on_i, f_on_i), (lp.data, data),
+        (lp.rhs[0], springs), (lp.rhs[1], rhs_rate),
+    ]:  # fmt: skip
+        np.testing.assert_array_equal(got, want)
+    assert (lp.n_active, lp.n_contacts, lp.n_frictional) == (active.sum(), in_contact.sum(), n_frictional)
