@@ -33,6 +33,17 @@ ROOT = Path(__file__).resolve().parents[1]
 SCORES = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
 
 
+def model_label(overrides: list[str]) -> str:
+    """The graph and model config groups the runs used (the training defaults with ``overrides``), and
+    the overrides themselves, for the table's caption."""
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        choices = compose(config_name="train", overrides=overrides, return_hydra_config=True).hydra.runtime
+    label = f"graph={choices.choices.graph}, model={choices.choices.model}"
+    return label + (", " + " ".join(overrides) if overrides else "")
+
+
 def ensemble_mean(preds: list[np.ndarray]) -> np.ndarray:
     """Mean of M predictions (G, 3) in physical units: geometric for η_r and Π (the scores are on log
     scale and both are positive), arithmetic for Z_μ."""
@@ -92,11 +103,11 @@ def main(argv=None) -> None:
         v = np.asarray(values, dtype=np.float64)
         return f"{np.nanmean(v):.4f} ± {np.nanstd(v, ddof=1):.4f}"
 
+    held_out = "whole trajectories held out" if args.split == "grouped" else "snapshots held out"
     lines = [
-        f"N = {args.n}, φ = {args.phi:.2f}, {args.split} split (whole trajectories held out), "
-        f"{len(folds)} folds, {args.epochs} epochs, default model (graph=physics_solve, model=resgcn_physics"
-        + (", " + " ".join(args.overrides) if args.overrides else "")
-        + f"); seeds {args.seeds}.  Mean ± std over the test folds; the ensemble averages the "
+        f"N = {args.n}, φ = {args.phi:.2f}, {args.split} split ({held_out}), "
+        f"{len(folds)} folds, {args.epochs} epochs, model: {model_label(args.overrides)}; seeds "
+        f"{args.seeds}.  Mean ± std over the test folds; the ensemble averages the "
         f"{len(args.seeds)} models of each fold (log η_r, log Π in log space).",
         "",
         "| model | " + " | ".join(label for _, label in SCORES) + " | fluct. η_r |",

@@ -91,8 +91,10 @@ def main(argv=None) -> None:
             "epochs).  Categorical values shown as sampled.",
             *sections,
             "Command: `python tune.py hparams_search=held_out_phi076 inputs=<physics|paper|"
-            "physics_positions>` (resumable), then `python bench/tune_report.py`; the best trial of "
-            "each study: `conf/experiment/<inputs>_phi076_best.yaml`.",
+            "physics_positions>` and `python tune.py hparams_search=held_out_phi076_solve` (resumable; "
+            "a study name is refused for a search space other than its trials'), then "
+            "`python bench/tune_report.py`; the best trial of each study: "
+            "`conf/experiment/<inputs>_phi076_best.yaml`.",
         ]
     )
     publish("tune_report", text, write=not args.no_write)

@@ -121,3 +121,37 @@ def test_flow_curve_cell_reports_the_arrested_packing_instead_of_nan():
     flowing = dict(point, jammed=False, pressure=5.0, pressure_se=0.1)
     assert flow_curve_cell(flowing, "pressure", records) == "5 ± 0.1"
     assert flow_curve_cell(flowing, "z_mu", records) == "–"
+
+
+def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means():
+    """An unfinished run (committed with its checkpoint) is listed under *other* and its snapshots are
+    left out of the snapshot counts, as the learning leaves them out; a flow-curve mean it enters is
+    marked unfinished."""
+    from rheograph.dataset_card import card_markdown
+
+    def record(stress, status, flowing, seed=1):
+        return dict(
+            n=2000, phi=0.8, stress=stress, seed=seed, status=status, n_snapshots=flowing,
+            n_flowing_snapshots=flowing, n_jammed_snapshots=0, cpu_seconds=3600.0, bytes=10**6,
+            snapshot_interval=0.1, decorrelation=dict(viscosity=0.2, pressure=0.2, z_mu=0.2),
+            transient=0.3, arrested=dict(pressure=np.array([]), z_mu=np.array([])),
+        )  # fmt: skip
+
+    records = [
+        record(20.0, "completed", 20),
+        record(20.0, "completed", 20, seed=2),
+        record(50.0, "interrupted", 7),
+    ]
+
+    def point(stress, statuses, seeds):
+        return dict(
+            n_particles=2000, phi=0.8, stress=stress, statuses=statuses, n_seeds=seeds, jammed=False,
+            viscosity=1000.0, viscosity_se=50.0, pressure=40.0, pressure_se=1.0, z_mu=2.5, z_mu_se=0.01,
+        )  # fmt: skip
+
+    points = [point(20.0, ["completed"], 2), point(50.0, ["interrupted"], 1)]
+    card = card_markdown(records, points, "python simulate.py -m …", 1.0)
+    assert "| 2000 | 0.80 | 3 | 2 | 2 | 0 | 1 | 40 | 0 | 3.00 | 3.0 |" in card
+    assert "40 snapshots of finished runs" in card and "1 unfinished run(s) (status interrupted" in card
+    assert "| 2000 | 0.80 | 20 | 2 | 1000 ± 50 |" in card
+    assert "| 2000 | 0.80 | 50 | 1 (unfinished) | 1000 ± 50 |" in card

@@ -7,7 +7,8 @@ import optuna
 import pytest
 from hydra import compose, initialize_config_dir
 
-from rheograph.learn.tune import make_objective, run_study
+from rheograph.errors import InputError
+from rheograph.learn.tune import check_study_space, make_objective, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -197,3 +198,21 @@ def test_epoch_reporter_prunes_by_epoch_and_names_a_metric_that_is_not_logged():
         reporter.on_validation_epoch_end(trainer, None)
     with pytest.raises(InputError, match="tune.metric='val/typo'"):
         EpochReporter(trial, "val/typo", 0).on_validation_epoch_end(trainer, None)
+
+
+def test_a_study_resumed_with_another_search_space_is_refused_by_name():
+    study = optuna.create_study(study_name="physics_solve_phi076")
+    study.add_trial(
+        optuna.trial.create_trial(
+            params={"model.lr": 1e-3, "graph.viscosity_on_solve": "True"},
+            distributions={
+                "model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
+                "graph.viscosity_on_solve": optuna.distributions.CategoricalDistribution(["False", "True"]),
+            },
+            value=0.1,
+        )
+    )
+    same = {"model.lr": {"type": "float"}, "graph.viscosity_on_solve": {"type": "categorical"}}
+    check_study_space(study, same)  # the space its trials searched: resumed
+    with pytest.raises(InputError, match="tune.study_name='physics_solve_phi076'.*graph.viscosity_on_solve"):
+        check_study_space(study, {"model.lr": {"type": "float"}})

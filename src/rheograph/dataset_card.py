@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 
 from rheograph.analysis import decorrelation_strain, jammed_snapshots, transient_strain
-from rheograph.collect import build_index, write_index
+from rheograph.collect import USABLE, build_index, write_index
 from rheograph.errors import InputError, one_line_errors
 from rheograph.flowcurve import collect
 from rheograph.sim.params import SimParams
@@ -179,21 +179,34 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
     ]
     for (n, phi), runs in sorted(by_phi_n.items()):
         status = [r["status"] for r in runs]
+        usable = [r for r in runs if r["status"] in USABLE]
         lines.append(
             f"| {n} | {phi:.2f} | {len(runs)} | {len({r['seed'] for r in runs})} "
             f"| {status.count('completed')} | {status.count('jammed')} "
-            f"| {len(status) - status.count('completed') - status.count('jammed')} "
-            f"| {sum(r['n_flowing_snapshots'] for r in runs)} "
-            f"| {sum(r['n_jammed_snapshots'] for r in runs)} "
+            f"| {len(runs) - len(usable)} "
+            f"| {sum(r['n_flowing_snapshots'] for r in usable)} "
+            f"| {sum(r['n_jammed_snapshots'] for r in usable)} "
             f"| {np.nansum([r['cpu_seconds'] for r in runs]) / 3600:.2f} "
             f"| {sum(r['bytes'] for r in runs) / 1e6:.1f} |"
         )
     total_bytes = sum(r["bytes"] for r in records)
+    unfinished = [r for r in records if r["status"] not in USABLE]
     lines += [
         "",
-        f"{len(records)} runs, {sum(r['n_snapshots'] for r in records)} snapshots, "
-        f"{total_bytes / 1e6:.1f} MB in all.  CPU hours: process CPU time recorded in each file "
-        "(`summary/cpu_seconds`), or for older files the seconds in `simulate.log` (single-threaded runs).",
+        f"{len(records)} runs, {sum(r['n_snapshots'] for r in records if r['status'] in USABLE)} "
+        f"snapshots of finished runs, {total_bytes / 1e6:.1f} MB in all.  CPU hours: process CPU time "
+        "recorded in each file (`summary/cpu_seconds`), or for older files the seconds in `simulate.log` "
+        "(single-threaded runs)."
+        + (
+            f"  *other*: {len(unfinished)} unfinished run(s) (status "
+            f"{', '.join(sorted({r['status'] for r in unfinished}))}; committed with their checkpoint, "
+            "resumed by the command above) with "
+            f"{sum(r['n_snapshots'] for r in unfinished)} snapshot(s) so far, counted in CPU hours and MB "
+            "but not in the snapshot columns; the learning reads finished runs only "
+            "(`rheograph.collect.USABLE`)."
+            if unfinished
+            else ""
+        ),
         "",
         "## Storage",
         "",
@@ -271,8 +284,10 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
     ]
     for pt in points:
         cells = [flow_curve_cell(pt, k, records) for k in TARGETS]
+        # a point averaged over an unfinished run is provisional: said in the seeds column
+        seeds = f"{pt['n_seeds']}" + ("" if set(pt["statuses"]) <= set(USABLE) else " (unfinished)")
         lines.append(
-            f"| {pt['n_particles']} | {pt['phi']:.2f} | {pt['stress']:g} | {pt['n_seeds']} | "
+            f"| {pt['n_particles']} | {pt['phi']:.2f} | {pt['stress']:g} | {seeds} | "
             + " | ".join(cells)
             + " |"
         )
@@ -366,7 +381,9 @@ def main(argv=None) -> None:
         default=(
             "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.70-0.78\n"
             "python simulate.py -m experiment=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)\n"
-            "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.76   # N = 2000, two seeds"
+            "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.70,0.76   # N = 2000, two seeds\n"
+            "python simulate.py -m experiment=dataset_paper_phi080 sim.n_particles=2000 sim.seed=1,2"
+            "   # N = 2000, phi 0.80"
         ),
         help="the command that regenerates the set (quoted in the card)",
     )

@@ -133,6 +133,21 @@ def check_base_config(cfg: DictConfig) -> None:
             )
 
 
+def check_study_space(study: optuna.Study, space: dict) -> None:
+    """A resumed study must search the space its finished trials searched: trials over other parameters
+    (another search config writing into the same study name, e.g. held_out_phi076 with
+    inputs=physics_solve next to held_out_phi076_solve) would mix incomparable trials into one study and
+    its best experiment.  Refused by name instead."""
+    names = set(space)
+    for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)):
+        if set(trial.params) != names:
+            raise InputError(
+                f"tune.study_name={study.study_name!r}: the stored study's trials searched "
+                f"{sorted(trial.params)}, this search space is {sorted(names)}; choose another "
+                "tune.study_name (or tune.storage) for a different search"
+            )
+
+
 def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     t = cfg.tune
     if objective is None:
@@ -158,6 +173,7 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
             n_startup_trials=t.pruner.n_startup_trials, n_warmup_steps=t.pruner.n_warmup_steps
         ),
     )
+    check_study_space(study, OmegaConf.to_container(t.search_space, resolve=True))
     if t.get("enqueue_defaults") and objective is None:
         enqueue_defaults(study, cfg)
     done = sum(s.state.is_finished() for s in study.trials)
