@@ -504,7 +504,8 @@ def inference(args) -> list[dict]:
 
 def render_inference(rows, args) -> str:
     lines = [
-        f"φ = {args.phi}, default model (2 × 64), one thread: every snapshot of a trajectory file predicted "
+        f"φ = {args.phi}, default model (2 × 64, `graph=physics_solve`: graph building includes the one "
+        "resistance solve per snapshot), one thread: every snapshot of a trajectory file predicted "
         "in one pass (read + graph building, batched forward, batches of 64 N = 400 / 12 N = 2000 graphs), "
         f"test-fold files of fold 0, median of {args.repeats} passes.  "
         "Simulator: every run's recorded CPU s/strain × its 1/e decorrelation strain of log η_r (median "
