@@ -695,8 +695,9 @@ def test_history_graphs_read_the_recorded_contacts_and_refuse_files_without_them
 def test_solve_viscosity_is_the_simulators_step_on_unstretched_springs():
     """One pass of solve_viscosity on a sheared configuration is the simulator's step restarted from
     those positions (springs unstretched, dt = disp_max): the same eta_r to round-off.  Two passes
-    re-assume dt as a running simulation would: with frictional contacts present, a different finite
-    value.  A rigid periodic translation changes nothing."""
+    re-assume dt as a running simulation would — the step restarted again with the dt the first pass
+    left — and with frictional contacts present give a different finite value.  A rigid periodic
+    translation changes nothing."""
     from rheograph.graphs.features import solve_viscosity
     from rheograph.sim.geometry import wrap_positions
     from rheograph.sim.integrator import SimState, Simulation
@@ -716,6 +717,9 @@ def test_solve_viscosity_is_the_simulators_step_on_unstretched_springs():
     assert solve_viscosity(*start, run_params, passes=1) == pytest.approx(first, rel=1e-10)
     two = solve_viscosity(*start, run_params)
     assert np.isfinite(two) and two > 1.0 and two != pytest.approx(first, rel=1e-6)
+    # the second pass is the step restarted once more from the snapshot, assuming the dt the first left
+    again = Simulation(params, SimState(start[0].copy(), *start[1:], dt_assumed=restarted.state.dt_assumed))
+    assert two == pytest.approx(params.stress / again.step().shear_rate, rel=1e-10)
     shifted = start[0] + np.array([0.37 * s.lx, 0.0])  # along the flow: Lees-Edwards images unchanged
     wrap_positions(shifted, s.lx, s.ly, s.le_offset)
     assert solve_viscosity(shifted, *start[1:], run_params) == pytest.approx(two, rel=1e-8)
