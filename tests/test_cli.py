@@ -62,11 +62,19 @@ def test_simulate_script_writes_and_resumes(tmp_path):
     assert read_run_info(files[0])["strain"] >= 0.08
 
 
-def test_bad_override_fails_with_the_parameter_name(tmp_path):
-    cmd = [sys.executable, str(ROOT / "simulate.py"), "sim=tiny", "sim.phi=0.95", f"output_root={tmp_path}"]
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("sim.phi=0.95", "sim.phi=0.95 is invalid: allowed 0 < phi <= 0.86"),
+        ("sim.phi=abc", "sim.phi='abc' is invalid: expected a number"),  # also names its run directory
+        ("solver=umfpack", "solver='umfpack' is unknown: allowed 'auto' or one of"),
+    ],
+)
+def test_bad_override_fails_with_the_parameter_name(tmp_path, override, message):
+    cmd = [sys.executable, str(ROOT / "simulate.py"), "sim=tiny", override, f"output_root={tmp_path}"]
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode != 0
-    assert "sim.phi=0.95 is invalid: allowed 0 < phi < 0.9" in done.stderr
+    assert message in done.stderr
     assert "Traceback" not in done.stderr
     assert not list(tmp_path.rglob("*.h5"))  # nothing half-written
 

@@ -79,16 +79,19 @@ def test_train_on_a_truncated_trajectory_says_so_and_leaves_it_alone(tmp_path, t
 
 
 def test_predict_on_a_file_that_is_not_hdf5(tmp_path):
+    """With a real model bundle (a committed one), the input file itself is what is refused, by name."""
     garbage = tmp_path / "notes.h5"
     garbage.write_text("this is not a trajectory")
     bundle_dir = tmp_path / "models"
     bundle_dir.mkdir()
+    shutil.copy(ROOT / "docs" / "results" / "surrogate_uncertainty" / "fold0.pt", bundle_dir / "fold0.pt")
     code, out = run(
         [str(ROOT / "predict.py"), "--models", str(bundle_dir), "--input", str(garbage), "--out", "x.csv"],
         tmp_path,
     )
-    assert_one_line_error(code, out, "predict.py: error:")
+    assert_one_line_error(code, out, "predict.py: error:", "notes.h5", "not a readable rheograph trajectory")
     assert garbage.read_text() == "this is not a trajectory"
+    assert not (tmp_path / "x.csv").exists()
 
 
 def test_collect_and_flowcurve_refuse_missing_directories(tmp_path):
@@ -236,3 +239,27 @@ def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tm
     assert (run_dir / "fold0.pt").read_bytes() == kept
     folds = json.loads((run_dir / "metrics.json").read_text())["folds"]
     assert [f["fold"] for f in folds] == [0, 1, 2]
+
+
+def test_tune_with_a_bad_fixed_model_option_stops_before_the_first_trial(tmp_path, tiny_files):
+    pattern = str(Path(tiny_files[0]).parent / "*.h5")
+    overrides = [
+        f"data.files={pattern}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.phi=null",
+        "data.n_particles=null",
+        "data.num_folds=3",
+        "graph.min_strain=0.05",
+        "model.aggr=sum",
+    ]
+    code, out = run(
+        [
+            str(ROOT / "tune.py"),
+            "train_overrides=[" + ",".join(f"'{o}'" for o in overrides) + "]",
+            "tune.n_trials=2",
+            f"tune.storage=sqlite:///{tmp_path}/study.db",
+            f"output_root={tmp_path}",
+        ],
+        tmp_path,
+    )
+    assert_one_line_error(code, out, "tune.py: error:", "model.aggr='sum' is invalid")

@@ -62,6 +62,7 @@ def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
             assert abs(t.value - sum(per_fold) / 2) < 1e-9
         pruned = [t for t in finished if t.state == optuna.trial.TrialState.PRUNED]
         assert all(len(t.intermediate_values) < 8 for t in pruned)
+        assert len(complete) + len(pruned) == 2  # every trial but the failing one finished either way
         best = (tmp_path / "experiment" / "resgcn_best.yaml").read_text()
         assert best.startswith("# @package _global_") and "model:" in best and "lr:" in best
         # the best experiment overrides existing keys of the training config with valid values

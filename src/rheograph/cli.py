@@ -25,8 +25,17 @@ def simulate_main(cfg: DictConfig) -> dict:
 
     from rheograph.runner import run_state_point
     from rheograph.sim.params import SimParams
+    from rheograph.sim.solver import resolve_solver_name
 
     params = SimParams.from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
+    resolve_solver_name(cfg.solver)  # an unknown or missing backend is refused before any work
+    if params.steady_state_strain >= params.strain:  # allowed (e.g. a start-up study), but said
+        log.warning(
+            "sim.steady_state_strain=%g >= sim.strain=%g: no steady window, the steady averages of this "
+            "run will be empty (NaN)",
+            params.steady_state_strain,
+            params.strain,
+        )
     run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
     path = run_dir / cfg.output_file
     log.info("state point %s -> %s", run_name(params), path)

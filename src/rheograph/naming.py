@@ -8,7 +8,11 @@ from __future__ import annotations
 def sim_id(n_particles, phi, stress, seed, disp_max, integrator, lagged_step_control=False) -> str:
     """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended
     with LF_DEM's lagged step control)."""
-    name = f"N{n_particles}_phi{phi:g}_s{stress:g}_seed{seed}_d{disp_max:g}_{integrator}"
+    # a value that is not a number still names a directory: SimParams refuses it by name afterwards
+    phi, stress, disp_max = (
+        f"{v:g}" if isinstance(v, int | float) else str(v) for v in (phi, stress, disp_max)
+    )
+    name = f"N{n_particles}_phi{phi}_s{stress}_seed{seed}_d{disp_max}_{integrator}"
     return name + "_lagged" if lagged_step_control else name
 
 

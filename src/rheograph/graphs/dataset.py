@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -70,8 +71,9 @@ class GraphSettings:
                 f"graph.graph_inputs={list(self.graph_inputs)}: allowed a subset of {list(GRAPH_INPUTS)}"
             )
         for name in ("viscosity_scale", "pressure_scale"):
-            if getattr(self, name) <= 0:
-                raise InputError(f"graph.{name} must be > 0")
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"graph.{name}={value} is invalid: allowed a finite value > 0")
         computed = [name for name in self.graph_inputs if name in COMPUTED_GRAPH_INPUTS]
         if computed and "log_stress" not in self.graph_inputs:
             raise InputError(
@@ -153,6 +155,12 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
                 )
                 for k in keep
             ]
+    reach = 2.0 * float(radii.max()) + settings.cutoff  # longest edge: two large particles and the gap
+    if min(lx, ly) <= 2.0 * reach:  # minimum images would no longer be unique: edges lost silently
+        raise InputError(
+            f"graph.cutoff={settings.cutoff} is too large for {path}: its box ({lx:.3g} x {ly:.3g} a) must "
+            f"exceed twice the longest edge ({reach:.3g} a)"
+        )
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
     known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
     graphs = []

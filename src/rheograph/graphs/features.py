@@ -70,7 +70,7 @@ SLIDE = 3  # rheograph.sim.contacts.SLIDE: the contact state of a spring at the 
 def overlap_unit(kn_coefficient: float) -> float:
     """delta_sigma [a]: overlap at which the normal spring force per a_bar equals the imposed stress.
 
-    k_n = kn_coefficient * sigma / (6 pi) [F_CL / a] (physics.md §3.2), so k_n a_bar delta = sigma a_bar
+    k_n = kn_coefficient * sigma / (6 pi) [F_CL / a^2] (physics.md §3.2), so k_n a_bar delta = sigma a_bar
     (delta / delta_sigma) with delta_sigma = 6 pi / kn_coefficient (9.4e-4 a at LF_DEM's 2e4)."""
     return 6.0 * np.pi / kn_coefficient
 

@@ -17,7 +17,7 @@ def _area_pool(x, batch, area):
 
 
 POOLS = {"mean": global_mean_pool, "add": global_add_pool, "max": global_max_pool, "area": _area_pool}
-BLOCKS = ("res", "res+", "dense", "plain")
+BLOCKS = ("res", "res+", "plain")  # DeepGCN's "dense" widens every layer: not supported
 AGGRS = ("softmax", "mean", "add", "max", "powermean")
 NORMS = {"batch": nn.BatchNorm1d, "layer": nn.LayerNorm}  # per-feature over the batch | per node
 GLOBAL_MIXING = ("none", "virtual_node", "attention")
@@ -40,10 +40,12 @@ class GraphAttention(nn.Module):
     masked): every particle reads every other, whatever the graph distance.
     x (N, hidden), batch (N,) -> (N, hidden)."""
 
-    def __init__(self, hidden: int, heads: int = 4):
+    HEADS = 4
+
+    def __init__(self, hidden: int):
         super().__init__()
         self.norm = nn.LayerNorm(hidden)
-        self.attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
+        self.attn = nn.MultiheadAttention(hidden, self.HEADS, batch_first=True)
 
     def forward(self, x, batch):
         dense, mask = to_dense_batch(self.norm(x), batch)
@@ -105,6 +107,13 @@ class ResGCN(nn.Module):
             raise InputError(f"model.global_mixing={global_mixing!r} is invalid: allowed {GLOBAL_MIXING}")
         if num_layers < 1 or hidden < 1 or head_layers < 1:
             raise InputError("model.num_layers, model.hidden and model.head_layers must be >= 1")
+        if not 0.0 <= dropout < 1.0:
+            raise InputError(f"model.dropout={dropout} is invalid: allowed 0 <= dropout < 1")
+        if global_mixing == "attention" and hidden % GraphAttention.HEADS:
+            raise InputError(
+                f"model.hidden={hidden} is invalid with model.global_mixing=attention: a multiple of "
+                f"{GraphAttention.HEADS} (the attention heads)"
+            )
         self.block, self.pool_name, self.global_in = block, pool, global_in
         # edge readout: the sums over pairs of every (standardised) edge feature per box area, batch
         # normalised, next to the pooled node embedding: the stresses and Z_mu are such sums, which the

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import lightning as L
 import numpy as np
 import torch
@@ -171,8 +173,12 @@ class SurrogateModule(L.LightningModule):
     ):
         super().__init__()
         self.save_hyperparameters()
-        if lr <= 0:
-            raise InputError(f"model.lr={lr} is invalid: allowed > 0")
+        if not (math.isfinite(lr) and lr > 0):
+            raise InputError(f"model.lr={lr} is invalid: allowed a finite value > 0")
+        if not (math.isfinite(weight_decay) and weight_decay >= 0):
+            raise InputError(f"model.weight_decay={weight_decay} is invalid: allowed >= 0")
+        if not (math.isfinite(huber_beta) and huber_beta >= 0):
+            raise InputError(f"model.huber_beta={huber_beta} is invalid: allowed >= 0 (0: L1)")
         if lr_schedule not in LR_SCHEDULES:
             raise InputError(f"model.lr_schedule={lr_schedule!r} is invalid: allowed {LR_SCHEDULES}")
         if warmup_epochs < 0:

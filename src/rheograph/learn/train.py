@@ -203,6 +203,8 @@ def train_folds_in_processes(cfg: DictConfig, run_dir: Path, folds: list[int]) -
 def folds_to_train(cfg: DictConfig) -> list[int]:
     """The folds ``cfg.fold`` selects: null = all ``data.num_folds``, an integer or a list of them."""
     num_folds = int(cfg.data.num_folds)
+    if not 2 <= num_folds <= 20:
+        raise InputError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
     chosen = cfg.get("fold")
     if chosen is None:
         return list(range(num_folds))
@@ -214,6 +216,19 @@ def folds_to_train(cfg: DictConfig) -> list[int]:
     return folds
 
 
+def check_run_settings(cfg: DictConfig) -> None:
+    """How a run trains, refused by name before any work: an epoch budget of at least one (the cosine
+    schedule spans it: Lightning's -1 for "unlimited" would make it oscillate), threads >= 0 (0: the
+    cores this process may use), fold processes >= 1."""
+    epochs = cfg.trainer.get("max_epochs")
+    if not isinstance(epochs, int) or epochs < 1:
+        raise InputError(f"trainer.max_epochs={epochs} is invalid: allowed an integer >= 1")
+    for key, low in (("threads", 0), ("fold_workers", 1)):
+        value = cfg.get(key)
+        if value is not None and (not isinstance(value, int) or value < low):
+            raise InputError(f"{key}={value} is invalid: allowed an integer >= {low}")
+
+
 def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     """Train the configured folds; write bundles, splits, predictions and the report into ``run_dir``.
 
@@ -222,6 +237,7 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     ``position``-th trained fold ``k``; folds then train in this process, one after the other.
     """
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    check_run_settings(cfg)
     # default: the cores this process may run on (taskset, a SLURM cpuset), at most 2 — not the machine's
     usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     threads = int(cfg.get("threads") or 0) or max(1, min(2, usable))

@@ -118,14 +118,14 @@ def make_objective(cfg: DictConfig, run_root: Path):
 
 
 def check_base_config(cfg: DictConfig) -> None:
-    """Bad input in the study's fixed overrides (a glob matching nothing, an invalid option) would fail
-    every trial; it ends the study before the first one instead, as one line (InputError)."""
-    from hydra.utils import instantiate
-
-    from rheograph.learn.train import graph_settings
+    """Bad input in the study's fixed overrides (a glob matching nothing, an invalid data, graph, model
+    or trainer option) would fail every trial; it ends the study before the first one instead, as one
+    line (InputError)."""
+    from rheograph.learn.train import check_run_settings, graph_settings, setup_fold
 
     train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
-    instantiate(train_cfg.data, graph=graph_settings(train_cfg), fold=0, _convert_="all").setup()
+    check_run_settings(train_cfg)
+    setup_fold(train_cfg, 0, graph_settings(train_cfg))  # data, graphs and the model's own options
     for name, spec in OmegaConf.to_container(cfg.tune.search_space, resolve=True).items():
         if spec.get("type") not in ("categorical", "int", "float"):
             raise InputError(

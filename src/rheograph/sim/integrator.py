@@ -347,7 +347,8 @@ class Simulation:
 
     # ---- one time step -----------------------------------------------------------------------
     def step(self, record: bool = False) -> StepResult:
-        """Advance one explicit-Euler step; ``record`` adds the full stress tensors and the contact list."""
+        """Advance one step (explicit Euler or linearly implicit springs: ``params.integrator``); ``record``
+        adds the full stress tensors and the contact list."""
         s, p = self.state, self.params
         clock = wallclock.perf_counter
         timings = self.timings

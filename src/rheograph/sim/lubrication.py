@@ -17,7 +17,7 @@ which makes the 6x6 pair block symmetric (R_{F_i, w_j} = R_{T_j, U_i}^T).
 import numpy as np
 from numba import njit
 
-# index layout of the per-pair coefficient array (P, 40): ten functions x four index pairs
+# index layout of the per-pair coefficient array (P, 36): nine functions x four index pairs
 XA, YA, YB, YC, XG, YG, YH, XM, YM = 0, 4, 8, 12, 16, 20, 24, 28, 32
 N_COEFF = 36
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 
 from rheograph.errors import InputError
@@ -44,7 +45,7 @@ class SimParams:
     critical_load: float = 1.0  # F_CL in force units (the unit itself; kept explicit for clarity)
     lub_max_gap: float = 0.5  # lubrication cut-off, reduced gap h / a_bar
     delta: float = 1e-3  # lubrication regularisation (h_min / a_bar)
-    kn_coefficient: float = 2e4  # k_n = kn_coefficient * (sigma/sigma0) / (6 pi)  [F_CL / a]
+    kn_coefficient: float = 2e4  # k_n = kn_coefficient * (sigma/sigma0) / (6 pi)  [F_CL / a^2]
     kt_ratio: float = 0.5  # k_t / k_n
     disp_max: float = 1e-3  # max displacement per step [a]
     integrator: str = "euler"  # "euler" (explicit, LF_DEM) or "implicit" (linearly implicit springs)
@@ -102,6 +103,24 @@ class SimParams:
 
     # ---- validation ----------------------------------------------------------------------------
     def validate(self) -> None:
+        # types first, so that the range checks below compare numbers (a YAML or command-line string,
+        # null or boolean would otherwise fail there with a TypeError, or pass as 0/1)
+        for field in dataclasses.fields(self):
+            value, default = getattr(self, field.name), field.default
+            if isinstance(default, bool):
+                ok, expected = isinstance(value, bool), "true or false"
+            elif isinstance(default, int):
+                ok, expected = (
+                    isinstance(value, numbers.Integral) and not isinstance(value, bool),
+                    "an integer",
+                )
+            elif isinstance(default, float):
+                ok, expected = isinstance(value, numbers.Real) and not isinstance(value, bool), "a number"
+            else:
+                ok, expected = isinstance(value, str), "a string"
+            if not ok:
+                raise ParameterError(f"sim.{field.name}={value!r} is invalid: expected {expected}")
+
         def check(name, ok, allowed):
             value = getattr(self, name)
             if isinstance(value, float) and not math.isfinite(value):
@@ -109,7 +128,8 @@ class SimParams:
             if not ok:
                 raise ParameterError(f"sim.{name}={value!r} is invalid: allowed {allowed}")
 
-        check("phi", 0.0 < self.phi < 0.9, "0 < phi < 0.9")
+        # above ~0.84 (random close packing of this bidisperse mixture) no overlap-free start exists
+        check("phi", 0.0 < self.phi <= 0.86, "0 < phi <= 0.86")
         check("stress", self.stress > 0.0, "stress > 0 (in units of sigma0)")
         check("size_ratio", 1.0 <= self.size_ratio <= 10.0, "1 <= size_ratio <= 10")
         check("strain", self.strain > 0.0, "strain > 0")

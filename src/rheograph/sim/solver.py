@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from rheograph.errors import InputError
+
 
 class SparseSPDSolver:
     name = "base"
@@ -125,9 +127,9 @@ def resolve_solver_name(name: str) -> str:
     if name == "auto":
         return "cholmod" if cholmod_available() else "qdldl"
     if name not in SOLVERS:
-        raise ValueError(f"solver={name!r} is unknown: allowed 'auto' or one of {sorted(SOLVERS)}")
+        raise InputError(f"solver={name!r} is unknown: allowed 'auto' or one of {sorted(SOLVERS)}")
     if name == "cholmod" and not cholmod_available():
-        raise ValueError(
+        raise InputError(
             "solver='cholmod' needs scikit-sparse and SuiteSparse (`make install` sets both up; or "
             "`apt-get install libsuitesparse-dev && pip install -e '.[cholmod]'`); "
             "solver=qdldl works everywhere"
