@@ -458,15 +458,29 @@ def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
     graphs = snapshot_graphs(tiny_files[1], SETTINGS, 0)[:2]
     batch = Batch.from_data_list(graphs)
     module = SurrogateModule(edge_in=6).eval()
-    module.log = lambda *a, **k: None
-    base = module._step(batch, "val")
+    logged = {}
+    module.log = lambda name, value, **k: logged.__setitem__(name, float(value))
+
+    def step(b):
+        loss = module._step(b, "val")
+        return loss.item(), dict(logged)
+
+    base, base_log = step(batch)
     batch.jammed[0] = True
     batch.y[0, 0] = 1e6
-    masked = module._step(batch, "val")
-    only_flowing = module._step(Batch.from_data_list(graphs[1:]), "val")
-    # with graph 0 jammed, its eta_r term drops out: eta_r's loss is that of graph 1 alone
-    assert masked.item() != pytest.approx(base.item())
-    assert np.isfinite(masked.item()) and masked.item() < 1e3 and only_flowing.item() > 0
+    masked, masked_log = step(batch)
+    only_flowing, flowing_log = step(Batch.from_data_list(graphs[1:]))
+    # with graph 0 jammed, its eta_r term drops out: eta_r's loss is that of graph 1 alone, while Pi and
+    # Z_mu are still scored on both graphs
+    assert masked != pytest.approx(base) and np.isfinite(masked) and masked < 1e3 and only_flowing > 0
+    assert masked_log["val/loss_eta"] == pytest.approx(flowing_log["val/loss_eta"], rel=1e-6)
+    for name in ("pressure", "z_mu"):
+        assert masked_log[f"val/loss_{name}"] == pytest.approx(base_log[f"val/loss_{name}"], rel=1e-6)
+    assert masked_log["val/loss_pressure"] != pytest.approx(flowing_log["val/loss_pressure"], rel=1e-3)
+    # a non-finite loss stops the fold with a message naming the remedy, never a silent NaN model
+    batch.y[1, 1] = float("nan")
+    with pytest.raises(FloatingPointError, match=r"val loss is nan \(diverged\): lower model.lr"):
+        module._step(batch, "val")
 
 
 @pytest.mark.parametrize(
@@ -907,3 +921,14 @@ def test_a_last_training_batch_of_one_graph_is_dropped_and_only_then(tiny_files,
         assert sorted((b.num_graphs for b in dm.train_dataloader()), reverse=True) == expected
     dm.batch_size = len(dm.val_idx) - 1  # evaluation normalises with running statistics: nothing dropped
     assert sorted(b.num_graphs for b in dm.val_dataloader()) == [1, len(dm.val_idx) - 1]
+
+
+def test_an_edge_cutoff_beyond_half_the_box_is_refused_by_name():
+    """Minimum images must be unique for the longest edge (two large particles plus the cutoff)."""
+    from rheograph.errors import InputError
+    from rheograph.graphs.dataset import check_edge_reach
+
+    radii = np.array([1.0, 1.4])
+    check_edge_reach(12.0, 12.0, radii, 3.1, "box.h5")  # 2 x (2.8 + 3.1) = 11.8 < 12
+    with pytest.raises(InputError, match=r"graph.cutoff=3.3 is too large for box.h5"):
+        check_edge_reach(12.0, 12.0, radii, 3.3, "box.h5")

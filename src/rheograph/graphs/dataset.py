@@ -155,12 +155,7 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
                 )
                 for k in keep
             ]
-    reach = 2.0 * float(radii.max()) + settings.cutoff  # longest edge: two large particles and the gap
-    if min(lx, ly) <= 2.0 * reach:  # minimum images would no longer be unique: edges lost silently
-        raise InputError(
-            f"graph.cutoff={settings.cutoff} is too large for {path}: its box ({lx:.3g} x {ly:.3g} a) must "
-            f"exceed twice the longest edge ({reach:.3g} a)"
-        )
+    check_edge_reach(lx, ly, radii, settings.cutoff, path)
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
     known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
     graphs = []
@@ -194,6 +189,18 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
             )
         )
     return graphs
+
+
+def check_edge_reach(lx: float, ly: float, radii: np.ndarray, cutoff: float, where) -> None:
+    """Edges join pairs within ``cutoff`` (surface gap, units of a): the longest, two of the largest
+    particles, must be shorter than half the box (lx x ly [a]), or minimum images stop being unique and
+    edges are lost silently.  Refused by name for the file ``where``."""
+    reach = 2.0 * float(np.max(radii)) + cutoff
+    if min(lx, ly) <= 2.0 * reach:
+        raise InputError(
+            f"graph.cutoff={cutoff} is too large for {where}: its box ({lx:.3g} x {ly:.3g} a) must "
+            f"exceed twice the longest edge ({reach:.3g} a)"
+        )
 
 
 def _files_fingerprint(files) -> list:
