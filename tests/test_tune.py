@@ -217,3 +217,46 @@ def test_a_study_resumed_with_another_search_space_is_refused_by_name():
     check_study_space(study, same)  # the space its trials searched: resumed
     with pytest.raises(InputError, match="tune.study_name='physics_solve_phi076'.*graph.viscosity_on_solve"):
         check_study_space(study, {"model.lr": {"type": "float"}})
+
+
+def test_a_failing_trial_does_not_stop_the_study_and_the_best_is_written_then_resumed(tmp_path):
+    """The driver without training (a stand-in objective over the real search space): a trial that raises
+    is recorded FAIL and the study goes on, the best trial's values land in the experiment config, and a
+    second invocation with a larger budget resumes the same study."""
+    from omegaconf import OmegaConf
+
+    from rheograph.learn.tune import suggest
+
+    overrides = [
+        f"output_root={tmp_path}",
+        f"tune.storage=sqlite:///{tmp_path}/study.db",
+        f"tune.best_experiment_dir={tmp_path}/experiment",
+        "tune.n_trials=3",
+    ]
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="tune", overrides=overrides)
+        space = OmegaConf.to_container(cfg.tune.search_space, resolve=True)
+
+        def objective(trial):
+            values = {name: suggest(trial, name, spec) for name, spec in space.items()}
+            if trial.number == 1:
+                raise FloatingPointError("forced failure (e.g. NaN loss)")
+            return float(values["model.lr"])
+
+        study = run_study(cfg, tmp_path / "trials", objective=objective)
+        states = [t.state for t in study.trials]
+        assert states == [
+            optuna.trial.TrialState.COMPLETE,
+            optuna.trial.TrialState.FAIL,
+            optuna.trial.TrialState.COMPLETE,
+        ]
+        best = OmegaConf.load(tmp_path / "experiment" / f"{cfg.tune.study_name}_best.yaml")
+        lowest = min(
+            t.params["model.lr"] for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE
+        )
+        assert best.model.lr == pytest.approx(lowest)
+
+        more = compose(config_name="tune", overrides=[*overrides[:-1], "tune.n_trials=4"])
+        resumed = run_study(more, tmp_path / "trials", objective=objective)
+        assert len(resumed.trials) == 4  # tune.n_trials counts finished trials, failed ones included
+        assert resumed.trials[0].params == study.trials[0].params
