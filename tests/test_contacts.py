@@ -113,3 +113,50 @@ def test_max_interaction_speed_matches_brute_force():
             expected = max(expected, abs(du @ t - w))
     got = contacts.max_interaction_speed(vel, radii, pi, pj, nvec, dy, active, state, shear)
     assert got == pytest.approx(expected, rel=1e-12)
+
+
+def test_contact_spring_stress_is_the_virial_over_touching_pairs_found_by_brute_force():
+    """The contact-spring stress of a sheared frictional packing (the kernels the step uses: pair
+    geometry, spring forces, virial) against an independent sum: each touching pair's nearest periodic
+    image searched over the 3 x 3 Lees–Edwards images, F_i = -k_n a_bar overlap n + k_t a_bar stretch,
+    sigma = (6 pi / A) sum sym(r (x) F_i).  Repulsive contacts give a positive pressure."""
+    from rheograph.sim.geometry import pair_geometry
+    from rheograph.sim.integrator import Simulation
+    from rheograph.sim.params import SimParams
+    from rheograph.sim.stress import spring_stress, stress_unit_factor
+
+    params = SimParams(n_particles=64, phi=0.78, stress=20.0, integrator="implicit", disp_max=2e-3)
+    sim = Simulation(params)
+    for _ in range(300):
+        sim.step()
+    s = sim.state
+    assert (s.contact_state == STICK).any() or (s.contact_state == SLIDE).any()
+    nvec, r, xi, _ = pair_geometry(s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset)
+    out = np.zeros(3 * s.radii.size)
+    f_on_i = contacts.contact_spring_forces(
+        s.radii, s.pair_i, s.pair_j, nvec, xi, s.stretch, s.contact_state, params.kn, params.kt, out
+    )
+    factor = stress_unit_factor(s.lx, s.ly)
+    kernel = factor * spring_stress(s.pair_i, nvec, r, f_on_i, s.contact_state, True)
+
+    brute = np.zeros(3)
+    touching = np.flatnonzero(s.contact_state != NONE)
+    assert touching.size > 10
+    for p in touching:
+        i, j = s.pair_i[p], s.pair_j[p]
+        images = [
+            s.positions[j] + kx * np.array([s.lx, 0.0]) + ky * np.array([s.le_offset, s.ly])
+            for kx in (-1, 0, 1)
+            for ky in (-1, 0, 1)
+        ]
+        rvec = min((x - s.positions[i] for x in images), key=np.linalg.norm)
+        dist = np.linalg.norm(rvec)
+        n = rvec / dist
+        abar = 0.5 * (s.radii[i] + s.radii[j])
+        overlap = s.radii[i] + s.radii[j] - dist
+        force = -params.kn * abar * overlap * n + params.kt * abar * s.stretch[p]
+        brute += factor * np.array(
+            [rvec[0] * force[0], 0.5 * (rvec[0] * force[1] + rvec[1] * force[0]), rvec[1] * force[1]]
+        )
+    np.testing.assert_allclose(kernel, brute, rtol=1e-10, atol=1e-12 * np.abs(brute).max())
+    assert -(kernel[0] + kernel[2]) / 3.0 > 0.0  # Pi = -tr(sigma)/3 of repulsive springs
