@@ -932,3 +932,17 @@ def test_an_edge_cutoff_beyond_half_the_box_is_refused_by_name():
     check_edge_reach(12.0, 12.0, radii, 3.1, "box.h5")  # 2 x (2.8 + 3.1) = 11.8 < 12
     with pytest.raises(InputError, match=r"graph.cutoff=3.3 is too large for box.h5"):
         check_edge_reach(12.0, 12.0, radii, 3.3, "box.h5")
+
+
+def test_a_target_without_spread_in_training_is_standardised_by_one_not_by_zero():
+    """Z_mu of frictionless training runs only is 0 everywhere: its scale is 1 (no division by ~0),
+    the other targets keep their spread."""
+    from rheograph.learn.module import SurrogateModule
+
+    module = SurrogateModule(edge_in=6, global_in=1)
+    y = torch.tensor([[3.0, 1.0, 0.0], [4.0, 3.0, 0.0], [5.0, 2.0, 0.0]])
+    module.fit_target_scaling(y, torch.ones(3), torch.zeros(3, 1))
+    torch.testing.assert_close(module.target_std.float(), torch.tensor([1.0, 1.0, 1.0]))
+    module.fit_target_scaling(y * 2.0, torch.ones(3), torch.zeros(3, 1))
+    torch.testing.assert_close(module.target_std.float(), torch.tensor([2.0, 2.0, 1.0]))
+    torch.testing.assert_close(module.reference_std.float(), torch.tensor([2.0, 2.0, 1.0]))

@@ -122,6 +122,13 @@ def pressure_in_sigma0(y: torch.Tensor, stress: torch.Tensor) -> torch.Tensor:
     return out
 
 
+def _spread(values: torch.Tensor) -> torch.Tensor:
+    """Per-column standard deviation of (G, 3) training targets, 1 for a column without spread (e.g. Z_mu
+    of frictionless training runs only): dividing by ~0 would blow the loss up to inf."""
+    std = values.std(dim=0)
+    return torch.where(std > 1e-6, std, torch.ones_like(std))
+
+
 class SurrogateModule(L.LightningModule):
     """ResGCN + summed SmoothL1 (beta = 1) over standardised targets, Adam.
 
@@ -228,8 +235,8 @@ class SurrogateModule(L.LightningModule):
         ``y`` (G, 3), imposed stresses ``stress`` (G,) and graph inputs ``u`` (G, global_in)."""
         learned = self._learned(y.double(), stress.double(), u.double())
         self.target_mean.copy_(learned.mean(dim=0))
-        self.target_std.copy_(learned.std(dim=0).clamp_min(1e-6))
-        self.reference_std.copy_(y.double().std(dim=0).clamp_min(1e-6))
+        self.target_std.copy_(_spread(learned))
+        self.reference_std.copy_(_spread(y.double()))
 
     def _net(self, batch) -> torch.Tensor:
         return self.net(batch.x, batch.edge_index, batch.edge_attr, batch.batch, batch.u, batch.area)
