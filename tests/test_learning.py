@@ -910,17 +910,22 @@ def test_run_settings_are_refused_by_name_before_any_work(override, message, tmp
         folds_to_train(cfg)
 
 
-def test_a_last_training_batch_of_one_graph_is_dropped_and_only_then(tiny_files, tmp_path):
-    """Batch normalisation of the edge readout cannot train on one graph: a last batch of one is left
-    out of the (shuffled) epoch; any other remainder is kept."""
-    dm = SnapshotDataModule(tiny_files, str(tmp_path), SETTINGS, fold=0, num_folds=3, split="grouped")
-    dm.setup()
-    n = len(dm.train_idx)
-    for batch_size, expected in ((n - 1, [n - 1]), (n - 2, [n - 2, 2]), (n, [n])):
-        dm.batch_size = batch_size
-        assert sorted((b.num_graphs for b in dm.train_dataloader()), reverse=True) == expected
-    dm.batch_size = len(dm.val_idx) - 1  # evaluation normalises with running statistics: nothing dropped
-    assert sorted(b.num_graphs for b in dm.val_dataloader()) == [1, len(dm.val_idx) - 1]
+def test_a_training_batch_of_one_graph_trains_with_the_running_statistics(tiny_files):
+    """The edge readout's batch normalisation has no batch statistics for one graph (the last batch of an
+    epoch, a DDP shard's): it uses the running ones, as in evaluation, instead of raising; two or more
+    graphs use and update the batch statistics as usual."""
+    graphs = snapshot_graphs(tiny_files[1], SETTINGS, 0)[:2]
+    model = ResGCN(2, 6, hidden=16, pool="area", edge_readout=True, global_in=0).train()
+    one = Batch.from_data_list(graphs[:1])
+    before = model.edge_readout.running_mean.clone()
+    out = model(one.x, one.edge_index, one.edge_attr, one.batch, None, one.area)
+    assert out.shape == (1, 3) and torch.isfinite(out).all()
+    torch.testing.assert_close(model.edge_readout.running_mean, before)  # nothing learnt from one graph
+    out.sum().backward()  # and it trains
+    assert model.head[-1].weight.grad is not None
+    two = Batch.from_data_list(graphs)
+    model.train()(two.x, two.edge_index, two.edge_attr, two.batch, None, two.area)
+    assert not torch.equal(model.edge_readout.running_mean, before)
 
 
 def test_an_edge_cutoff_beyond_half_the_box_is_refused_by_name():

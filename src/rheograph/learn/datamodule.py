@@ -202,19 +202,16 @@ class SnapshotDataModule(L.LightningDataModule):
     def save_split(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.split_record()))
 
-    def _loader(self, idx, shuffle, drop_last=False):
+    def _loader(self, idx, shuffle):
         return DataLoader(
             self.dataset[torch.as_tensor(idx)],
             batch_size=self.batch_size,
             shuffle=shuffle,
             num_workers=self.num_workers,
-            drop_last=drop_last,
         )
 
     def train_dataloader(self):
-        # batch normalisation cannot train on a batch of one graph (the edge readout normalises per-graph
-        # sums): a last batch of one is dropped (a different graph every shuffled epoch), none otherwise
-        return self._loader(self.train_idx, True, drop_last=len(self.train_idx) % self.batch_size == 1)
+        return self._loader(self.train_idx, True)
 
     def val_dataloader(self):
         return self._loader(self.val_idx, False)

@@ -178,7 +178,16 @@ class ResGCN(nn.Module):
         if self.edge_readout is not None:
             graphs = int(batch.max()) + 1 if batch.numel() else 0
             sums = global_add_pool(scaled, batch[edge_index[0]], size=graphs) / area.view(-1, 1)
-            pooled = torch.cat([pooled, self.edge_readout(sums)], dim=1)
+            norm = self.edge_readout
+            if self.training and graphs == 1:
+                # a training batch of one graph (the last of an epoch, a DDP shard's) has no batch
+                # statistics: normalised with the running ones, as in evaluation
+                readout = nn.functional.batch_norm(
+                    sums, norm.running_mean, norm.running_var, norm.weight, norm.bias, False, 0.0, norm.eps
+                )
+            else:
+                readout = norm(sums)
+            pooled = torch.cat([pooled, readout], dim=1)
         if self.global_in:
             pooled = torch.cat([pooled, u], dim=1)
         return self.head(pooled)
