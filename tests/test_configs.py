@@ -39,20 +39,40 @@ def test_dataset_experiments_sweep_valid_state_points_at_the_converged_step(name
 
 @pytest.mark.parametrize("name", [e for e in EXPERIMENTS if not e.startswith("dataset_")])
 def test_training_experiments_compose(name):
+    """Every training experiment composes, passes the run checks, and its graph and model options build
+    (the graph settings and a model of the inputs they imply): a typo fails here, not after the data."""
+    from hydra.utils import instantiate
+
+    from rheograph.learn.train import check_run_settings, folds_to_train, graph_settings
+
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"experiment={name}"])
-    assert cfg.data.num_folds >= 2 and cfg.trainer.max_epochs >= 1
+    check_run_settings(cfg)
+    assert folds_to_train(cfg)
+    settings = graph_settings(cfg)
+    module = instantiate(
+        cfg.model, edge_in=len(settings.edge_features), global_in=len(settings.graph_inputs), _convert_="all"
+    )
+    assert sum(p.numel() for p in module.parameters()) > 0
 
 
-@pytest.mark.parametrize("inputs", ["physics", "paper", "physics_positions"])
-def test_search_configs_compose_one_study_per_input_variant(inputs):
+@pytest.mark.parametrize(
+    "search,inputs",
+    [
+        ("held_out_phi076", "physics"),
+        ("held_out_phi076", "paper"),
+        ("held_out_phi076", "physics_positions"),
+        ("held_out_phi076_solve", "physics_solve"),
+    ],
+)
+def test_search_configs_compose_one_study_per_input_variant(search, inputs):
     """Each study's fixed overrides and every corner of its search space compose a valid training
     config, and the study is named after its input variant (one study per variant, issue #12)."""
     from rheograph.learn.train import folds_to_train
     from rheograph.learn.tune import fixed_overrides
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="tune", overrides=["hparams_search=held_out_phi076", f"inputs={inputs}"])
+        cfg = compose(config_name="tune", overrides=[f"hparams_search={search}", f"inputs={inputs}"])
         assert cfg.tune.study_name == f"{inputs}_phi076"
         base = fixed_overrides(cfg)
         assert f"graph={inputs}" in base
