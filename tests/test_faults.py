@@ -104,14 +104,16 @@ def test_collect_and_flowcurve_refuse_missing_directories(tmp_path):
     assert_one_line_error(code, out, "no rheograph trajectory")
 
 
-def test_a_corrupt_graph_cache_entry_is_rebuilt(tiny_files, tmp_path):
+def test_a_corrupt_graph_cache_entry_is_rebuilt(tiny_files, tmp_path, caplog):
     settings = GraphSettings(min_strain=0.05)
     first = SnapshotGraphDataset(tiny_files, settings, tmp_path)
     cached = Path(first.processed_paths[0])
     cached.write_bytes(cached.read_bytes()[:100])  # e.g. a build killed mid-write
-    again = SnapshotGraphDataset(tiny_files, settings, tmp_path)
+    with caplog.at_level("WARNING", logger="rheograph.graphs"):
+        again = SnapshotGraphDataset(tiny_files, settings, tmp_path)
     assert len(again) == len(first)
     assert (again[0].edge_attr == first[0].edge_attr).all()
+    assert any("unreadable" in r.message and "rebuilding" in r.message for r in caplog.records)
 
 
 def test_debug_flag_shows_the_traceback(tmp_path):
