@@ -44,3 +44,16 @@ def load_bench_script(name: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def tiny_training_overrides(tiny_files, tmp_path) -> list[str]:
+    """``train.py`` overrides that train on the tiny runs (not the paper-scale default's phi / N), with a
+    cache of their own and snapshots from strain 0.05 on."""
+    return [
+        f"data.files={Path(tiny_files[0]).parent / '*.h5'}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+        "data.phi=null",
+        "data.n_particles=null",
+        "data.num_folds=3",
+        "graph.min_strain=0.05",
+    ]

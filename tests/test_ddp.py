@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import tiny_training_overrides
 from hydra import compose, initialize_config_dir
 
 from rheograph.learn.train import train_folds
@@ -18,16 +19,10 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
     trained model must agree between 1 and 2 processes (without batch normalisation the only difference
     is the distributed sampler's padding, so 5 % on MAE and 0.05 on R^2 are generous yet tight enough to
     catch metrics computed on one shard only)."""
-    pattern = str(Path(tiny_files[0]).parent / "*.h5")
     base = [
-        f"data.files={pattern}",
-        f"data.cache_dir={tmp_path / 'cache'}",
-        "data.num_folds=3",
+        *tiny_training_overrides(tiny_files, tmp_path),
         "data.split=random",  # three runs in three grouped folds would train on one stress only
-        "data.phi=null",  # the tiny runs are not the default phi / N of data=paper
-        "data.n_particles=null",
         "fold=0",
-        "graph.min_strain=0.05",
         "trainer.max_epochs=1",
         "~logger",
         "report=false",

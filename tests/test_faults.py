@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from conftest import tiny_training_overrides
+
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -244,16 +246,7 @@ def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tm
 
 
 def test_tune_with_a_bad_fixed_model_option_stops_before_the_first_trial(tmp_path, tiny_files):
-    pattern = str(Path(tiny_files[0]).parent / "*.h5")
-    overrides = [
-        f"data.files={pattern}",
-        f"data.cache_dir={tmp_path / 'cache'}",
-        "data.phi=null",
-        "data.n_particles=null",
-        "data.num_folds=3",
-        "graph.min_strain=0.05",
-        "model.aggr=sum",
-    ]
+    overrides = [*tiny_training_overrides(tiny_files, tmp_path), "model.aggr=sum"]
     code, out = run(
         [
             str(ROOT / "tune.py"),

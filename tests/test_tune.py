@@ -5,6 +5,7 @@ from pathlib import Path
 
 import optuna
 import pytest
+from conftest import tiny_training_overrides
 from hydra import compose, initialize_config_dir
 
 from rheograph.errors import InputError
@@ -15,16 +16,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.mark.slow
 def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
-    pattern = str(Path(tiny_files[0]).parent / "*.h5")
     train_overrides = [
-        f"data.files={pattern}",
-        f"data.cache_dir={tmp_path / 'cache'}",
-        "data.num_folds=3",
+        *tiny_training_overrides(tiny_files, tmp_path),
         "data.split=random",  # three runs in three grouped folds would train on one stress only
-        "data.phi=null",
-        "data.n_particles=null",
         "fold=[0,2]",
-        "graph.min_strain=0.05",
         "trainer.max_epochs=4",
         "~logger",
         "report=false",
