@@ -104,8 +104,7 @@ class SnapshotDataModule(L.LightningDataModule):
         super().__init__()
         if split not in SPLITS:
             raise InputError(f"data.split={split!r} is invalid: allowed {SPLITS}")
-        if not 2 <= num_folds <= 20:
-            raise InputError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
+        check_num_folds(num_folds)
         if not 0 <= fold < num_folds:
             raise InputError(f"data.fold={fold} is invalid: allowed 0..{num_folds - 1}")
         if not 0.0 < train_fraction <= 1.0:
@@ -218,6 +217,12 @@ class SnapshotDataModule(L.LightningDataModule):
 
     def test_dataloader(self):
         return self._loader(self.test_idx, False)
+
+
+def check_num_folds(num_folds: int) -> None:
+    """K-fold cross-validation needs a test and a validation fold: 2..20 folds."""
+    if not 2 <= num_folds <= 20:
+        raise InputError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
 
 
 def thin_snapshots(idx: np.ndarray, runs: np.ndarray, fraction: float) -> np.ndarray:

@@ -16,7 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
-from rheograph.learn.datamodule import SPLIT_VERSION
+from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
 from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
@@ -203,8 +203,7 @@ def train_folds_in_processes(cfg: DictConfig, run_dir: Path, folds: list[int]) -
 def folds_to_train(cfg: DictConfig) -> list[int]:
     """The folds ``cfg.fold`` selects: null = all ``data.num_folds``, an integer or a list of them."""
     num_folds = int(cfg.data.num_folds)
-    if not 2 <= num_folds <= 20:
-        raise InputError(f"data.num_folds={num_folds} is invalid: allowed 2..20")
+    check_num_folds(num_folds)
     chosen = cfg.get("fold")
     if chosen is None:
         return list(range(num_folds))
