@@ -7,7 +7,7 @@ import pytest
 
 from rheograph.analysis import read_lfdem_data, steady_state_summary
 
-REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "lfdem_phi0.76"
+REFERENCE = Path(__file__).resolve().parent / "data" / "lfdem_phi0.76"  # LF_DEM output, see its README
 
 
 def test_viscosity_is_stress_over_time_averaged_shear_rate():
@@ -35,7 +35,6 @@ def test_too_short_window_gives_nan_not_a_number_made_up():
     assert np.isnan(out["viscosity"]) and out["n_rows"] == 0
 
 
-@pytest.mark.skipif(not REFERENCE.exists(), reason="shared reference data not present")
 @pytest.mark.parametrize(
     "name,eta,se",
     [("data_N400_phi0.76_s0.5_disp1e-3.dat", 45.3, 1.2), ("data_N400_phi0.76_s10_disp1e-3.dat", 155, 11)],
@@ -78,7 +77,6 @@ def test_reference_steps_per_strain_from_the_mean_dt_column(tmp_path):
     assert point["viscosity"] == pytest.approx(20.0)
 
 
-@pytest.mark.skipif(not REFERENCE.exists(), reason="shared reference data not present")
 def test_reference_step_counts_match_the_reference_readme():
     """README: 1.1e4 steps per strain at disp_max 2e-3 and 1.6e4 at 1e-3 (phi 0.76, sigma/sigma0 10)."""
     from rheograph.flowcurve import reference_points
@@ -91,7 +89,6 @@ def test_reference_step_counts_match_the_reference_readme():
 DATA = Path(__file__).resolve().parents[1] / "data" / "flow_curves" / "implicit"
 
 
-@pytest.mark.skipif(not DATA.is_dir(), reason="committed trajectories not present")
 def test_jammed_state_points_report_the_static_packing_not_a_viscosity():
     """phi = 0.80, sigma/sigma0 = 50: two seeds shear-jammed, one before the steady window; the point has
     no viscosity, and the pressure and Z_mu of the seed that has a steady window."""

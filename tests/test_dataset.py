@@ -14,8 +14,6 @@ from rheograph.collect import read_index
 ROOT = Path(__file__).resolve().parents[1]
 INDEX = ROOT / "data" / "paper" / "index.json"
 
-pytestmark = pytest.mark.skipif(not INDEX.exists(), reason="data/paper/index.json not committed")
-
 
 @pytest.fixture(scope="module")
 def index():

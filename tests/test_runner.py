@@ -390,7 +390,6 @@ def test_jam_window_counts_the_window_total_not_single_rows():
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-@pytest.mark.skipif(not DATA.is_dir(), reason="committed trajectories not present")
 def test_default_jam_window_replayed_on_the_committed_runs_flags_only_the_jammed_ones():
     """docs/benchmarks.md: the default window (10 rows), replayed on every committed trajectory, flags
     the phi = 0.80 runs that shear-jammed and none of the flowing ones (phi up to 0.80, sigma up to 200,

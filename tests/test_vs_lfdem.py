@@ -16,7 +16,7 @@ from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "bench" / "vs_lfdem.py"
-REFERENCE_PARAMS = ROOT.parent / "shared" / "reference" / "lfdem_phi0.76" / "parameters_clm2d.txt"
+REFERENCE_PARAMS = ROOT / "tests" / "data" / "lfdem_phi0.76" / "parameters_clm2d.txt"
 
 
 @pytest.fixture(scope="module")
@@ -82,9 +82,6 @@ def test_configuration_of_simparams_is_what_the_simulation_starts_from(vs_lfdem)
 
 
 def test_parameter_file_follows_the_reference(vs_lfdem):
-    if not REFERENCE_PARAMS.exists():
-        pytest.skip("shared/reference not present")
-
     def entries(text):
         """{key: value}, numbers as (float, unit suffix): "2e4s" == "20000s"."""
         body = "\n".join(line for line in text.splitlines() if not line.startswith("/*"))
