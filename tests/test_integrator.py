@@ -8,6 +8,7 @@ from rheograph.sim.assembly import assemble_resistance, dense_from_upper_csc
 from rheograph.sim.geometry import pair_geometry
 from rheograph.sim.integrator import SimState, particle_pressure, viscosity
 from rheograph.sim.lubrication import lubrication_resistance, pair_block
+from rheograph.sim.stress import pair_stress_sums
 
 
 def small_sim(**kw):
@@ -184,3 +185,91 @@ def test_linear_problem_equals_the_separate_kernels():
     ]:  # fmt: skip
         np.testing.assert_array_equal(got, want)
     assert (lp.n_active, lp.n_contacts, lp.n_frictional) == (active.sum(), in_contact.sum(), n_frictional)
+
+
+def _frictional_linear_problem(size_ratio):
+    """A dense frictional state (implicit springs, contacts of every kind) and its linear problem, with the
+    simulator's shear stress per unit rate as a function of the non-affine velocities, and the contacts'
+    rotation defect (see the reciprocity test)."""
+    from rheograph.sim.integrator import linear_problem
+    from rheograph.sim.lubrication import contact_block
+
+    params = SimParams(
+        n_particles=100, phi=0.78, stress=20.0, size_ratio=size_ratio, integrator="implicit", disp_max=2e-3
+    )
+    sim = Simulation(params)
+    for _ in range(300):
+        sim.step()
+    s, p = sim.state, params
+    lp = linear_problem(
+        s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, s.stretch.copy(),
+        s.contact_state.copy(), p.kn, p.kt, p.mu, p.critical_load, p.lub_max_gap, p.delta, s.dt_assumed,
+        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
+    )  # fmt: skip
+    assert lp.n_contacts > 10 and lp.lubricated.any() and (lp.k_tangential > 0).any()
+    matrix = dense_from_upper_csc(lp.data, sim.indices, sim.indptr, 3 * p.n_particles)
+
+    def shear_stress_per_unit_rate(velocity):
+        """Lubrication + dashpot pair sum of S_xy for non-affine velocities ``velocity`` (3N) plus the
+        affine flow at unit shear rate (the simulator's own kernel)."""
+        _, _, lub, dash = pair_stress_sums(
+            np.zeros(3 * p.n_particles), velocity, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.r, lp.dy,
+            lp.coeff, lp.lubricated, lp.in_contact, lp.k_normal, lp.k_tangential, False,
+        )  # fmt: skip
+        return lub[1] + dash[1]
+
+    def rotation_defect(velocity):
+        """sum over contacts of d . R_contact U: the affine flow at unit rate is, for a pair at distance r,
+        a rigid rotation at distance a_i + a_j (which the contact block annihilates), plus the strain
+        E r, plus d = j moving by overlap / 2 along the tangent -- the contact slides at rate x overlap/2
+        under pure affine flow (as in LF_DEM, whose sliding velocity uses the radii)."""
+        out = 0.0
+        for q in np.flatnonzero(lp.in_contact):
+            i, j = s.pair_i[q], s.pair_j[q]
+            nx, ny = lp.nvec[q]
+            block = contact_block(
+                lp.coeff[q], nx, ny, s.radii[i], s.radii[j], lp.k_normal[q], lp.k_tangential[q],
+                np.empty((6, 6)),
+            )  # fmt: skip
+            overlap = s.radii[i] + s.radii[j] - lp.r[q]
+            d = np.zeros(6)
+            d[3:5] = 0.5 * overlap * np.array([-ny, nx])
+            out += d @ block @ np.r_[velocity[3 * i : 3 * i + 3], velocity[3 * j : 3 * j + 3]]
+        return out
+
+    return lp, matrix, shear_stress_per_unit_rate, rotation_defect
+
+
+@pytest.mark.parametrize("size_ratio", [1.0, 1.4])
+def test_stress_and_linear_system_are_reciprocal_over_the_whole_system(size_ratio):
+    """Stokes reciprocity R_SU = R_FE^T across the assembled system (Lees-Edwards images, lubrication,
+    contact dashpots with implicit springs, one-body drag): the shear stresslet that non-affine velocities
+    U add is -U . (R_FE : E), the unit-rate right-hand side the simulator solves with, up to the contacts'
+    closed-form rotation defect of O(overlap / a).  A sign or index slip between the stress kernel and the
+    assembly (which per-pair tests cannot see) breaks it.  LF_DEM's lubrication rotation term (Y^M for
+    Y^H, physics.md 4) is reciprocal for equal radii only: rotations enter at size ratio 1."""
+    lp, _, shear_stress, rotation_defect = _frictional_linear_problem(size_ratio)
+    rng = np.random.default_rng(7)
+    affine_only = shear_stress(np.zeros(lp.rhs.shape[1]))
+    for _ in range(3):
+        velocity = rng.normal(size=lp.rhs.shape[1])
+        if size_ratio != 1.0:
+            velocity[2::3] = 0.0
+        added = shear_stress(velocity) - affine_only
+        defect = rotation_defect(velocity)
+        assert added == pytest.approx(-lp.rhs[1] @ velocity - defect, rel=1e-9, abs=1e-9 * abs(affine_only))
+        assert 0.0 < abs(defect) < 1e-2 * abs(added)  # present, and as small as overlaps (~1e-3 a)
+
+
+def test_free_particles_dissipate_less_than_affinely_dragged_ones():
+    """Helmholtz minimum dissipation, equal radii (exact reciprocity): with U = R_FU^-1 (R_FE : E) the
+    particle shear stress per unit rate is S_1 = E:R_SE:E - U . R_FU U (up to the contacts' rotation
+    defect), i.e. the stress of particles held to the affine flow minus the dissipation their free motion
+    saves: 0 < S_1 < E:R_SE:E."""
+    lp, matrix, shear_stress, rotation_defect = _frictional_linear_problem(1.0)
+    velocity = np.linalg.solve(matrix, lp.rhs[1])
+    affine_only = shear_stress(np.zeros_like(velocity))
+    saved = velocity @ matrix @ velocity
+    free = shear_stress(velocity)
+    assert free == pytest.approx(affine_only - saved - rotation_defect(velocity), rel=1e-9)
+    assert 0.0 < free < affine_only and saved > 0.01 * affine_only
