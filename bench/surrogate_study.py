@@ -204,8 +204,9 @@ def main(argv=None) -> None:
         "|---|---|" + "---|" * (len(COLUMNS) + 2),
         *rows,
         "",
-        "Command: `python bench/surrogate_study.py --phi "
-        f"{args.phi} --epochs {args.epochs} --batch-size {args.batch_size} --runs "
+        "Command: `python bench/surrogate_study.py "
+        + ("--reuse " if args.reuse else "")
+        + f"--phi {args.phi} --epochs {args.epochs} --batch-size {args.batch_size} --runs "
         + " ".join(args.runs)
         + "`; reports: docs/results/surrogate_study/.",
     ]
