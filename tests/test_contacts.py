@@ -160,3 +160,57 @@ def test_contact_spring_stress_is_the_virial_over_touching_pairs_found_by_brute_
         )
     np.testing.assert_allclose(kernel, brute, rtol=1e-10, atol=1e-12 * np.abs(brute).max())
     assert -(kernel[0] + kernel[2]) / 3.0 > 0.0  # Pi = -tr(sigma)/3 of repulsive springs
+
+
+def test_contact_dashpot_stress_is_the_virial_of_the_dashpot_forces_found_by_brute_force():
+    """The full (xx, xy, yy) dashpot stress of the step's kernel, for the solved velocities of both parts
+    (springs at zero rate, unit-rate affine flow), against an independent sum over touching pairs: the
+    nearest Lees-Edwards image, the dashpot force on i F_i = -[R_contact (U + U_affine)]_i with the
+    affine flow y e_x and spin -1/2 at unit rate, and sym(r (x) F_i) -- the same virial convention as the
+    springs.  The xx and yy components carry the dashpot's share of the particle pressure."""
+    from rheograph.sim.assembly import dense_from_upper_csc
+    from rheograph.sim.integrator import Simulation, linear_problem
+    from rheograph.sim.lubrication import contact_block
+    from rheograph.sim.params import SimParams
+    from rheograph.sim.stress import pair_stress_sums
+
+    params = SimParams(n_particles=64, phi=0.78, stress=20.0, integrator="implicit", disp_max=2e-3)
+    sim = Simulation(params)
+    for _ in range(300):
+        sim.step()
+    s, p = sim.state, params
+    lp = linear_problem(
+        s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, s.stretch.copy(),
+        s.contact_state.copy(), p.kn, p.kt, p.mu, p.critical_load, p.lub_max_gap, p.delta, s.dt_assumed,
+        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
+    )  # fmt: skip
+    matrix = dense_from_upper_csc(lp.data, sim.indices, sim.indptr, 3 * p.n_particles)
+    velocities = np.linalg.solve(matrix, lp.rhs.T)  # (3N, 2): springs, unit rate
+    _, dash_const, _, dash_rate = pair_stress_sums(
+        velocities[:, 0], velocities[:, 1], s.radii, s.pair_i, s.pair_j, lp.nvec, lp.r, lp.dy, lp.coeff,
+        lp.lubricated, lp.in_contact, lp.k_normal, lp.k_tangential, True,
+    )  # fmt: skip
+
+    touching = np.flatnonzero(lp.in_contact)
+    assert touching.size > 10
+    for part, kernel in ((0, dash_const), (1, dash_rate)):
+        brute = np.zeros(3)
+        for q in touching:
+            i, j = s.pair_i[q], s.pair_j[q]
+            images = [
+                s.positions[j] + kx * np.array([s.lx, 0.0]) + ky * np.array([s.le_offset, s.ly])
+                for kx in (-1, 0, 1)
+                for ky in (-1, 0, 1)
+            ]
+            rvec = min((x - s.positions[i] for x in images), key=np.linalg.norm)
+            n = rvec / np.linalg.norm(rvec)
+            u = np.r_[velocities[3 * i : 3 * i + 3, part], velocities[3 * j : 3 * j + 3, part]]
+            if part == 1:  # relative affine flow: j moves by y_j - y_i along x, both spin at -1/2
+                u += [0.0, 0.0, -0.5, rvec[1], 0.0, -0.5]
+            block = contact_block(
+                lp.coeff[q], *n, s.radii[i], s.radii[j], lp.k_normal[q], lp.k_tangential[q], np.empty((6, 6))
+            )
+            force = -(block @ u)[0:2]
+            brute += [rvec[0] * force[0], 0.5 * (rvec[0] * force[1] + rvec[1] * force[0]), rvec[1] * force[1]]
+        np.testing.assert_allclose(kernel, brute, rtol=1e-9, atol=1e-10 * np.abs(brute).max())
+    assert abs(dash_rate[0]) > 1e-3 * abs(dash_rate[1])  # the normal components are not trivially zero

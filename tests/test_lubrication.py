@@ -149,3 +149,71 @@ def test_contact_block_adds_positive_stiffness():
     scratch = np.full((6, 6), np.nan)
     np.testing.assert_array_equal(contact_block(coeff, nx, ny, 1.0, 1.4, 0.0, 0.0, scratch), base)
     np.testing.assert_array_equal(pair_block(coeff, nx, ny, stiff), base)
+
+
+def sym_outer(n, f):
+    """(xx, xy, yy) of sym(n (x) f)."""
+    return np.array([n[0] * f[0], 0.5 * (n[0] * f[1] + n[1] * f[0]), n[1] * f[1]])
+
+
+def rotate_tensor(q, s):
+    """(xx, xy, yy) of Q S Q^T."""
+    m = q @ np.array([[s[0], s[1]], [s[1], s[2]]]) @ q.T
+    return np.array([m[0, 0], m[0, 1], m[1, 1]])
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+@pytest.mark.parametrize("xi", [1e-4, 0.05, 0.4])
+def test_strain_stresslet_is_the_virial_of_the_strain_force(ai, aj, xi):
+    """Particles held still (U = 0) in a rate of strain E: the pair stresslet, all three components, is
+    minus the virial of the force the strain exerts on j with the contact lever arm a_i + a_j,
+    S = -(a_i + a_j) sym(n (x) F_j), at every gap: pins the squeeze (X^M) and shear (Y^M) stresslet
+    coefficients to the force coefficients X^G, Y^G, which the reciprocity test ties to the velocity
+    terms and test_squeeze_closed_form to X^A.  E here is any symmetric tensor, trace included."""
+    coeff, _, _ = coefficients(ai, aj, xi)
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        n = np.array(unit(rng.uniform(0, 2 * np.pi)))
+        exx, exy, eyy = rng.normal(size=3)
+        s = np.zeros(3)
+        _add_lubrication_stresslet(s, coeff, *n, np.zeros(2), np.zeros(2), 0.0, 0.0, exx, exy, eyy, True)
+        f_j = strain_force(coeff, *n, exx, exy, eyy, np.empty(6))[3:5]
+        np.testing.assert_allclose(
+            s, -(ai + aj) * sym_outer(n, f_j), rtol=1e-10, atol=1e-10 * np.abs(s).max()
+        )
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+def test_full_stresslet_reciprocity_for_any_strain(ai, aj):
+    """R_SU = R_FE^T on the whole tensor: for any E (extension, shear, compression) the stresslet that
+    translations U add, contracted with E (S_xx E_xx + 2 S_xy E_xy + S_yy E_yy), is -U . (R_FE : E).
+    Checks the xx and yy components, which carry the particle pressure Pi."""
+    coeff, _, _ = coefficients(ai, aj, 0.02)
+    rng = np.random.default_rng(5)
+    for _ in range(4):
+        n = np.array(unit(rng.uniform(0, 2 * np.pi)))
+        e = rng.normal(size=3)
+        u = rng.normal(size=6)
+        u[2] = u[5] = 0.0
+        s = np.zeros(3)
+        _add_lubrication_stresslet(s, coeff, *n, u[0:2], u[3:5], 0.0, 0.0, 0.0, 0.0, 0.0, True)
+        g = strain_force(coeff, *n, *e, np.empty(6))
+        assert s[0] * e[0] + 2 * s[1] * e[1] + s[2] * e[2] == pytest.approx(-(g @ u), rel=1e-10)
+
+
+def test_stresslet_rotates_with_the_pair():
+    """Objectivity: rotating the line of centres, the velocities and the strain rate by Q rotates the
+    whole stresslet, S(Qn, QU, w, Q E Q^T) = Q S Q^T (2D spins are unchanged)."""
+    coeff, _, _ = coefficients(1.0, 1.4, 0.01)
+    rng = np.random.default_rng(2)
+    n = np.array(unit(0.4))
+    ui, uj, e = rng.normal(size=2), rng.normal(size=2), rng.normal(size=3)
+    wi, wj = rng.normal(size=2)
+    s = np.zeros(3)
+    _add_lubrication_stresslet(s, coeff, *n, ui, uj, wi, wj, *e, True)
+    for angle in (0.7, 2.0, np.pi):
+        q = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        e_rot = rotate_tensor(q, e)
+        s_rot = np.zeros(3)
+        _add_lubrication_stresslet(s_rot, coeff, *(q @ n), q @ ui, q @ uj, wi, wj, *e_rot, True)
+        np.testing.assert_allclose(s_rot, rotate_tensor(q, s), rtol=1e-10, atol=1e-12 * np.abs(s).max())
