@@ -214,3 +214,36 @@ def test_contact_dashpot_stress_is_the_virial_of_the_dashpot_forces_found_by_bru
             brute += [rvec[0] * force[0], 0.5 * (rvec[0] * force[1] + rvec[1] * force[0]), rvec[1] * force[1]]
         np.testing.assert_allclose(kernel, brute, rtol=1e-9, atol=1e-10 * np.abs(brute).max())
     assert abs(dash_rate[0]) > 1e-3 * abs(dash_rate[1])  # the normal components are not trivially zero
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.9, 2.5])
+def test_stretch_grows_with_the_sliding_of_the_contact_point(theta):
+    """increment_stretch integrates the tangential surface velocity of j relative to i at the contact:
+    a uniform translation adds nothing; j moving along the tangent t adds v dt t; a rigid rotation of the
+    pair at centre distance r (U = omega z x x, spins omega) slides by omega (r - a_i - a_j) -- zero at
+    touching distance; the affine shear at rate g (relative velocity g dy e_x, spins -g/2) slides by
+    g (dy t_x + (a_i + a_j)/2); and a pair that is not in contact keeps its stretch untouched."""
+    n = np.array([np.cos(theta), np.sin(theta)])
+    t = np.array([-n[1], n[0]])
+    nvec = n[None, :]
+    dt, omega = 0.01, 0.3
+
+    def increment(vel, state=STICK, shear_rate=0.0, r=2.4):
+        stretch = np.full((1, 2), 0.25)
+        dy = np.array([r * n[1]])
+        contacts.increment_stretch(
+            vel, RADII, PI, PJ, nvec, dy, np.array([state], dtype=np.int8), stretch, shear_rate, dt
+        )
+        return stretch[0] - 0.25
+
+    np.testing.assert_allclose(increment(np.array([0.4, -0.7, 0.0, 0.4, -0.7, 0.0])), 0.0, atol=1e-15)
+    np.testing.assert_allclose(increment(np.r_[0.0, 0.0, 0.0, 0.5 * t, 0.0]), 0.5 * dt * t, rtol=1e-12)
+    for r in (2.4, 2.39):  # touching, and overlapping by 0.01
+        xi_, xj_ = np.zeros(2), r * n
+        rigid = np.r_[omega * np.array([-xi_[1], xi_[0]]), omega, omega * np.array([-xj_[1], xj_[0]]), omega]
+        np.testing.assert_allclose(increment(rigid, r=r), omega * (r - 2.4) * dt * t, atol=1e-15)
+    # affine shear at rate g alone: relative velocity g dy e_x, spins -g/2 -> sliding along t
+    g, r = 2.0, 2.4
+    expected = (g * r * n[1] * t[0] + 0.5 * g * 2.4) * dt * t
+    np.testing.assert_allclose(increment(np.zeros(6), shear_rate=g, r=r), expected, atol=1e-14)
+    np.testing.assert_array_equal(increment(np.r_[0.0, 0.0, 0.0, t, 0.0], state=NONE), 0.0)

@@ -273,3 +273,114 @@ def test_free_particles_dissipate_less_than_affinely_dragged_ones():
     free = shear_stress(velocity)
     assert free == pytest.approx(affine_only - saved - rotation_defect(velocity), rel=1e-9)
     assert 0.0 < free < affine_only and saved > 0.01 * affine_only
+
+
+@pytest.mark.parametrize("integrator", ["euler", "implicit"])
+def test_no_particle_moves_more_than_disp_max_in_a_step(integrator):
+    """The step rule, checked on the positions themselves: every particle's non-affine displacement over a
+    step (position change minus the affine shear_rate * y * dt, particles crossing the Lees-Edwards
+    boundary excepted) and the strain increment stay within disp_max; and the largest of them reaches it
+    within the share that pair speeds (normal approach, sliding) can take -- the step is not over-cautious."""
+    disp_max = 2e-3
+    sim = small_sim(integrator=integrator, disp_max=disp_max, stress=20.0, phi=0.78)
+    advance(sim, 100)
+    s = sim.state
+    largest = []
+    for _ in range(200):
+        before = s.positions.copy()
+        res = sim.step()
+        move = s.positions - before
+        move[:, 0] -= res.shear_rate * before[:, 1] * res.dt
+        move[:, 0] -= s.lx * np.round(move[:, 0] / s.lx)  # wrapped through the left or right side
+        inside = np.abs(move[:, 1]) < 0.5 * s.ly  # not wrapped through the top or bottom
+        step = np.sqrt((move[inside] ** 2).sum(axis=1)).max()
+        assert step <= disp_max * (1 + 1e-9)
+        assert abs(res.shear_rate) * res.dt <= disp_max * (1 + 1e-12)
+        largest.append(max(step, abs(res.shear_rate) * res.dt))
+    assert np.median(largest) > 0.2 * disp_max
+
+
+def test_neighbour_list_always_holds_every_pair_within_reach():
+    """Verlet-list staleness: at every step of a dense, fast-shearing run (small skin, so the list is
+    rebuilt often and a late rebuild would show), every pair within the lubrication cut-off -- found by
+    brute force over the Lees-Edwards images -- is in the list."""
+    from rheograph.sim.geometry import brute_force_pairs
+
+    sim = small_sim(n_particles=64, phi=0.80, stress=200.0, neighbour_skin=0.1, disp_max=4e-3)
+    s, p = sim.state, sim.params
+    rebuilds = 0
+    for _ in range(600):
+        listed_before = s.pair_i
+        sim.step()
+        rebuilds += s.pair_i is not listed_before
+        near_i, near_j = brute_force_pairs(s.positions, s.radii, s.lx, s.ly, s.le_offset, p.lub_max_gap, 0.0)
+        n = s.radii.size
+        missing = np.setdiff1d(near_j * n + near_i, s.pair_j * n + s.pair_i)
+        assert missing.size == 0, f"{missing.size} pairs within reach are not listed"
+    assert rebuilds >= 3 and s.strain > 0.02
+
+
+def test_contact_memory_follows_the_pair_through_a_neighbour_list_rebuild():
+    """_transfer_contacts carries stretch and state by pair identity (i, j): continuing pairs keep them,
+    new pairs start empty, dropped pairs vanish; a rebuild mid-run changes nothing of the next step."""
+    from rheograph.sim.integrator import _transfer_contacts
+
+    n = 10
+    old_i, old_j = np.array([0, 2, 1, 4]), np.array([1, 3, 5, 5])  # sorted by (j, i)
+    old_stretch = np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0], [7.0, 8.0]])
+    old_state = np.array([2, 0, 3, 1], dtype=np.int8)
+    new_i, new_j = np.array([0, 2, 4, 3]), np.array([1, 3, 5, 9])  # (1, 5) dropped, (3, 9) new
+    stretch, state = _transfer_contacts(old_i, old_j, old_stretch, old_state, new_i, new_j, n)
+    np.testing.assert_array_equal(stretch, [[1.0, 2.0], [3.0, 4.0], [7.0, 8.0], [0.0, 0.0]])
+    np.testing.assert_array_equal(state, [2, 0, 1, 0])
+
+    dense = dict(phi=0.80, stress=20.0, integrator="implicit", disp_max=2e-3)
+    ref, test = small_sim(**dense), small_sim(**dense)
+    advance(ref, 300)
+    advance(test, 300)
+    touching = test.state.contact_state != 0
+    key = dict(
+        zip(zip(test.state.pair_i[touching], test.state.pair_j[touching]), test.state.stretch[touching])
+    )
+    assert len(key) > 5
+    test._rebuild_neighbours()  # same positions: a list built afresh, memory transferred
+    s = test.state
+    for i, j, stretch_p in zip(s.pair_i, s.pair_j, s.stretch):
+        if (i, j) in key:
+            np.testing.assert_array_equal(stretch_p, key[(i, j)])
+    a, b = ref.step(record=True), test.step(record=True)
+    assert b.shear_rate == pytest.approx(a.shear_rate, rel=1e-9)
+    assert b.n_frictional == a.n_frictional and b.n_contacts == a.n_contacts
+
+
+def test_lees_edwards_images_follow_the_affine_shear():
+    """Particles that do not interact move affinely at shear rate 1 (sigma = eta0 * rate): after any
+    number of steps the boundary offset equals strain * Ly modulo Lx, and every pair vector the
+    simulator computes is the initial one sheared, (dx0 + strain dy0, dy0), up to a lattice vector of
+    the sheared box, (k Lx + m offset, m Ly) -- pairs across the top/bottom boundary included."""
+    from rheograph.sim.geometry import pair_geometry
+
+    params = SimParams(n_particles=36, phi=0.05, stress=1.0, disp_max=0.05)
+    n_small, n_large = params.species_counts()
+    box = params.box_length()
+    g = (np.arange(6) + 0.5) / 6 * box - box / 2
+    pos = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    radii = np.r_[np.ones(n_small), np.full(n_large, params.size_ratio)]
+    sim = Simulation(params, state=SimState(positions=pos.copy(), radii=radii, lx=box, ly=box))
+    i, j = np.triu_indices(36, 1)
+    d0 = pos[j] - pos[i]
+    crossed = 0
+    for _ in range(40):
+        res = sim.step()
+        assert res.shear_rate == pytest.approx(1.0, rel=1e-12)
+        s = sim.state
+        wraps = (s.le_offset - s.strain * s.ly) / s.lx
+        assert wraps == pytest.approx(round(wraps), abs=1e-9)
+        nvec, r, _, _ = pair_geometry(s.positions, s.radii, i, j, s.lx, s.ly, s.le_offset)
+        diff = nvec * r[:, None] - np.stack([d0[:, 0] + s.strain * d0[:, 1], d0[:, 1]], axis=1)
+        m = diff[:, 1] / s.ly
+        np.testing.assert_allclose(m, np.round(m), atol=1e-9)
+        k = (diff[:, 0] - np.round(m) * s.le_offset) / s.lx
+        np.testing.assert_allclose(k, np.round(k), atol=1e-9)
+        crossed += np.any(np.round(m) != 0)
+    assert sim.state.strain > 1.0 and crossed
