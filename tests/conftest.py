@@ -1,5 +1,8 @@
 import os
 
+# as simulate.py: single-threaded linear algebra (CHOLMOD starts OpenMP threads unless OMP_THREAD_LIMIT is
+# set before libgomp loads: 1.6x the CPU time of a simulation on a busy 2-core machine)
+os.environ.setdefault("OMP_THREAD_LIMIT", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
