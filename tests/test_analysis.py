@@ -45,6 +45,26 @@ def test_estimator_reproduces_the_reference_summary(name, eta, se):
     stress = float(name.split("_s")[1].split("_")[0])
     out = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, 1.0)
     assert out["viscosity"] == pytest.approx(eta, abs=se / 2)
+    assert out["viscosity_se"] == pytest.approx(se, rel=0.1)  # the same block estimate of the error
+
+
+def test_block_standard_error_of_uncorrelated_rows_is_the_textbook_one():
+    """Uncorrelated rows of spread s, n of them: the block standard error estimates s / sqrt(n).  One
+    estimate from 5 blocks scatters by ~35 %; the mean of its square over 400 independent series is
+    within ~4 % (1 s.d.) of s^2 / n, so 15 % is a tolerance that a wrong formula (e.g. the spread of
+    the block means not divided by sqrt(5), or s/n) cannot meet."""
+    rng = np.random.default_rng(4)
+    n, spread = 500, 0.3
+    strain = np.linspace(1.0, 6.0, n)
+    time = strain.copy()  # unit shear rate
+    ones = np.ones(n)
+    ratios = []
+    for _ in range(400):
+        pressure = 2.0 + spread * rng.normal(size=n)
+        out = steady_state_summary(strain, time, pressure, ones, ones, 1.0, 1.0)
+        assert out["pressure"] == pytest.approx(np.mean(pressure), abs=1e-9)
+        ratios.append(out["pressure_se"] ** 2 * n / spread**2)
+    assert np.mean(ratios) == pytest.approx(1.0, rel=0.15)
 
 
 def test_flow_curve_report_pools_seeds_and_flags_states(tiny_files, tmp_path):

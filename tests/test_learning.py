@@ -108,6 +108,25 @@ def test_dataset_cache_is_keyed_by_settings(tiny_files, tmp_path):
     assert c[0].edge_index.shape[1] > a[0].edge_index.shape[1]
 
 
+def test_dataset_cache_is_rebuilt_when_a_trajectory_grows(tiny_files, tmp_path):
+    """The cache key covers each file's size and modification time: a run extended to a longer strain
+    (new snapshots appended) gets a new cache with its new graphs, not the stale one."""
+    import shutil
+
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    path = tmp_path / "run.h5"
+    shutil.copy(tiny_files[1], path)
+    before = SnapshotGraphDataset([path], SETTINGS, tmp_path / "cache")
+    with h5py.File(path) as h5:
+        params = SimParams.from_mapping(json.loads(h5.attrs["params"]))
+    run_state_point(dataclasses.replace(params, strain=params.strain + 0.1), path, progress=False)
+    after = SnapshotGraphDataset([path], SETTINGS, tmp_path / "cache")
+    assert after.digest != before.digest
+    assert len(after) == len(before) + 4  # snapshots every 0.025 strain
+
+
 @pytest.mark.parametrize("groups", [None, np.repeat(np.arange(7), [5, 9, 3, 7, 6, 4, 8])])
 def test_folds_are_disjoint_and_cover_everything(groups):
     n = 42

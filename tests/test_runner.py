@@ -245,6 +245,56 @@ def test_resume_refuses_corrupt_and_foreign_files(tmp_path):
         run_state_point(SimParams(**TINY), foreign, progress=False)
 
 
+def test_an_interruption_between_checkpoint_delete_and_move_resumes_exactly(tmp_path):
+    """The checkpoint is replaced atomically: written as checkpoint_new, the old one deleted, the new one
+    moved.  A kill between delete and move leaves only checkpoint_new; the resume promotes it and the
+    run ends bit-identical to the uninterrupted one."""
+    params = SimParams(**TINY)
+    ref = tmp_path / "ref.h5"
+    run_state_point(params, ref, progress=False)
+    cut = tmp_path / "cut.h5"
+    assert run_state_point(params, cut, progress=False, max_steps=40).status == "interrupted"
+    with h5py.File(cut, "r+") as h5:
+        h5.move("checkpoint", "checkpoint_new")
+    assert run_state_point(params, cut, progress=False).status == "completed"
+    a, b = read_timeseries(ref), read_timeseries(cut)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+@pytest.mark.parametrize("damage", ["schema", "no_checkpoint"])
+def test_a_file_of_another_schema_or_without_checkpoint_is_refused_untouched(tmp_path, damage):
+    path = tmp_path / "run.h5"
+    run_state_point(SimParams(**TINY), path, progress=False, max_steps=20)
+    with h5py.File(path, "r+") as h5:
+        if damage == "schema":
+            h5.attrs["schema_version"] = 0
+        else:
+            del h5["checkpoint"]
+    before = path.read_bytes()
+    match = "schema_version 0, this rheograph writes 1" if damage == "schema" else "checkpoint is missing"
+    with pytest.raises(TrajectoryFileError, match=match):
+        run_state_point(SimParams(**TINY), path, progress=False)
+    assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "text,match",
+    [
+        ("{not json", "not a readable rheograph index"),
+        ('{"format": "other", "runs": []}', "not a rheograph index"),
+    ],
+)
+def test_an_index_that_is_not_one_is_refused_by_name(tmp_path, text, match):
+    from rheograph.collect import read_index
+    from rheograph.errors import InputError
+
+    path = tmp_path / "index.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=match):
+        read_index(path)
+
+
 @pytest.mark.parametrize(
     "override,match",
     [
