@@ -394,11 +394,34 @@ def test_graph_settings_validation():
         GraphSettings(edge_features=("gap", "colour"))
 
 
-def test_batched_graphs_predict_one_row_per_graph(tiny_files):
-    graphs = snapshot_graphs(tiny_files[0], SETTINGS, 0)[:4]
-    batch = Batch.from_data_list(graphs)
-    out = ResGCN(2, 6, hidden=8).eval()(batch.x, batch.edge_index, batch.edge_attr, batch.batch)
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        dict(pool="area", edge_readout=True, global_in=1, aggr="add"),
+        dict(global_mixing="virtual_node", global_in=1),
+        dict(global_mixing="attention", pool="add"),
+    ],
+)
+def test_batched_graphs_predict_what_each_graph_predicts_alone(tiny_files, options):
+    """One row per graph, and no leakage between the graphs of a batch (pooling, edge readout, virtual
+    node and attention all per graph; normalisation with running statistics in evaluation): the batched
+    prediction of each graph equals its prediction alone, to float32 round-off."""
+    torch.manual_seed(0)
+    graphs = [g for f in tiny_files for g in snapshot_graphs(f, SETTINGS, 0)[:2]][:4]
+    model = ResGCN(2, 6, hidden=8, **options).eval()
+
+    def predict(batch):
+        u = torch.log10(batch.stress).float().view(-1, 1) if options.get("global_in") else None
+        area = batch.area if "area" in batch else None
+        return model(batch.x, batch.edge_index, batch.edge_attr, batch.batch, u, area)
+
+    out = predict(Batch.from_data_list(graphs))
     assert out.shape == (4, 3)
+    for k, g in enumerate(graphs):
+        alone = predict(Batch.from_data_list([g]))
+        torch.testing.assert_close(out[k : k + 1], alone, rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(out[0], out[-1])  # graphs of different stresses differ
 
 
 def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):

@@ -343,8 +343,11 @@ def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, 
     assert out.status in ("completed", "interrupted")
     for key in ("shear_rate", "viscosity", "pressure", "max_overlap"):
         assert np.all(np.isfinite(ts[key])), key
-    # k_n scales with the stress, so overlaps stay a few percent of a at any stress
-    assert ts["max_overlap"].max() < 0.05
+    # k_n scales with the stress, so the overlap in units of the typical one, F_CL sigma/sigma0 / k_n =
+    # 6 pi / 2e4 = 9.4e-4 a, does not grow with the stress; a k_n fixed at its sigma/sigma0 = 1 value
+    # would give overlaps of 200-1000 typical ones here
+    typical = 6 * np.pi / 2e4
+    assert ts["max_overlap"].max() < 10 * typical
 
 
 def test_jam_detection_ends_a_stalled_run(tmp_path):
