@@ -6,6 +6,7 @@ import pytest
 from rheograph.sim.lubrication import (
     N_COEFF,
     XA,
+    YA,
     contact_block,
     pair_block,
     pair_coefficients,
@@ -217,3 +218,37 @@ def test_stresslet_rotates_with_the_pair():
         s_rot = np.zeros(3)
         _add_lubrication_stresslet(s_rot, coeff, *(q @ n), q @ ui, q @ uj, wi, wj, *e_rot, True)
         np.testing.assert_allclose(s_rot, rotate_tensor(q, s), rtol=1e-10, atol=1e-12 * np.abs(s).max())
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+@pytest.mark.parametrize("xi", [1e-4, 0.05, 0.4])
+def test_strain_force_is_the_resistance_to_the_affine_relative_velocity(ai, aj, xi):
+    """Particles held still in a rate of strain E feel what they would feel approaching and shearing
+    past each other at the affine relative velocity across the contact distance, (a_i + a_j) E n:
+    F_j = -(a_i + a_j) [X^A_11 (n.E.n) n + Y^A_11 (t.E.n) t], F_i = -F_j, at every gap.  Pins the strain
+    coefficients X^G, Y^G to X^A, Y^A (test_squeeze_closed_form, the equal-sphere tangential closed form)."""
+    coeff, _, _ = coefficients(ai, aj, xi)
+    rng = np.random.default_rng(13)
+    for _ in range(4):
+        n = np.array(unit(rng.uniform(0, 2 * np.pi)))
+        t = np.array([-n[1], n[0]])
+        exx, exy, eyy = rng.normal(size=3)
+        en = np.array([exx * n[0] + exy * n[1], exy * n[0] + eyy * n[1]])
+        f = strain_force(coeff, *n, exx, exy, eyy, np.empty(6))
+        expected = -(ai + aj) * (coeff[XA] * (n @ en) * n + coeff[YA] * (t @ en) * t)
+        np.testing.assert_allclose(f[3:5], expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+        np.testing.assert_allclose(f[0:2], -expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("ai,aj", RADII)
+def test_shear_resistance_closed_form(ai, aj):
+    """Leading log term of Jeffrey & Onishi (1984) for unequal spheres, lambda = a_j / a_i:
+    Y^A_11 = (4/15) a_i lambda (2 + lambda + 2 lambda^2) / (1 + lambda)^3 ln(1/xi) -- 1/6 a ln(1/xi) for
+    equal spheres (the closed form above); Y^A_12 = -Y^A_11 (momentum conservation)."""
+    xi = 1e-3
+    coeff, _, ell = coefficients(ai, aj, xi, delta=1e-12)
+    lam = aj / ai
+    assert ell == pytest.approx(np.log(1 / xi), rel=1e-8)
+    expected = (4 / 15) * ai * lam * (2 + lam + 2 * lam**2) / (1 + lam) ** 3 * ell
+    assert coeff[YA] == pytest.approx(expected, rel=1e-12)
+    assert coeff[YA + 1] == pytest.approx(-expected, rel=1e-12)
