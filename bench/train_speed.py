@@ -139,7 +139,7 @@ def fit_fold(cfg, k=0, curve=False):
 
 
 # ---- levers -------------------------------------------------------------------------------------------
-def epoch_seconds(net, batches, repeats, shuffle_batches=True):
+def epoch_seconds(net, batches, repeats):
     """Median seconds of one training epoch of ``net`` over ``batches`` (a callable returning the epoch's
     batches, so that collation can be inside the timed region), Adam, one warm-up epoch."""
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)

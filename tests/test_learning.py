@@ -938,6 +938,7 @@ def _module(**options):
         ("trainer.max_epochs=0", "trainer.max_epochs=0 is invalid"),
         ("trainer.max_epochs=-1", "trainer.max_epochs=-1 is invalid"),
         ("threads=-1", "threads=-1 is invalid"),
+        ("threads=0", "threads=0 is invalid: allowed an integer >= 1"),
         ("fold_workers=0", "fold_workers=0 is invalid"),
     ],
 )

@@ -309,6 +309,10 @@ def test_an_index_that_is_not_one_is_refused_by_name(tmp_path, text, match):
         (dict(strain="abc"), "sim.strain='abc' is invalid: expected a number"),
         (dict(mu=None), "sim.mu=None is invalid: expected a number"),
         (dict(mu=True), "sim.mu=True is invalid: expected a number"),
+        (
+            dict(critical_load=2.0),
+            "sim.critical_load=2.0 is invalid: allowed 1 \\(F_CL is the unit of force\\)",
+        ),
         (dict(seed=True), "sim.seed=True is invalid: expected an integer"),
         (dict(lagged_step_control=1), "sim.lagged_step_control=1 is invalid: expected true or false"),
     ],
@@ -438,6 +442,25 @@ def test_jam_window_counts_the_window_total_not_single_rows():
     window_time, window_strain = t[row] - t[row - 10], strain[row] - strain[row - 10]
     assert stress * window_time > eta_jam * window_strain
     assert stress * (t[row - 1] - t[row - 11]) <= eta_jam * (strain[row - 1] - strain[row - 11])
+
+
+def test_snapshots_are_labelled_jammed_from_the_first_row_of_the_detectors_window():
+    """The run ends at the row where the detector fires; its window holds the last jam_intervals
+    intervals, i.e. starts jam_intervals rows earlier.  A snapshot taken inside the window's first
+    interval shows the stalled packing (jammed); one taken before the window flowed."""
+    from rheograph.analysis import jammed_snapshots
+    from rheograph.runner import first_jammed_row
+
+    stress, eta_jam, intervals = 10.0, 1e5, 10
+    t = np.arange(40.0)
+    strain = np.concatenate([0.01 * np.arange(20.0), 0.19 + 1e-6 * np.arange(1.0, 21.0)])
+    end = first_jammed_row(t, strain, stress, eta_jam, intervals)
+    series = strain[: end + 1]  # the run's rows when it ends
+    start = series[end - intervals]  # first row of the stalled window
+    snapshots = np.array([start - 1e-4, start, 0.5 * (start + series[end - intervals + 1]), series[-1]])
+    labels = jammed_snapshots("jammed", snapshots, series, intervals)
+    np.testing.assert_array_equal(labels, [False, True, True, True])
+    assert not jammed_snapshots("completed", snapshots, series, intervals).any()
 
 
 DATA = Path(__file__).resolve().parents[1] / "data"

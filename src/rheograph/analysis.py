@@ -112,13 +112,14 @@ def transient_strain(strain, values, steady_from: float, block: float = 0.1) -> 
 def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals: int) -> np.ndarray:
     """(S,) bool: the snapshots of a run taken after its flow stopped.
 
-    A run ends ``jammed`` when its last ``jam_intervals`` output rows together flowed slower than the jam
-    viscosity (rheograph.runner); the snapshots from the first of those rows on show the arrested packing
-    (its Π and Z_μ are targets, its η_r is not), the earlier ones a flowing suspension.  All False for a
-    run that did not jam."""
+    A run ends ``jammed`` when over its last ``jam_intervals`` output intervals -- between its last
+    ``jam_intervals`` + 1 rows -- the flow was together slower than the jam viscosity (rheograph.runner);
+    the snapshots from the first row of that window on show the arrested packing (its Π and Z_μ are
+    targets, its η_r is not), the earlier ones a flowing suspension.  All False for a run that did not
+    jam."""
     snapshot_strain = np.asarray(snapshot_strain, dtype=np.float64)
     series_strain = np.asarray(series_strain, dtype=np.float64)
     if status != "jammed" or series_strain.size == 0:
         return np.zeros(snapshot_strain.size, dtype=bool)
-    onset = series_strain[max(series_strain.size - int(jam_intervals), 0)]
+    onset = series_strain[max(series_strain.size - 1 - int(jam_intervals), 0)]
     return snapshot_strain >= onset

@@ -1,4 +1,6 @@
-"""Hydra entry points; ``simulate.py`` and ``train.py`` at the repository root only call these."""
+"""Hydra entry points; ``simulate.py``, ``train.py`` and ``tune.py`` at the repository root only call
+these.  The training entry points set OMP_WAIT_POLICY before importing torch (OpenMP reads it once).
+"""
 
 from __future__ import annotations
 
@@ -19,8 +21,8 @@ def register_resolvers() -> None:
 
 
 def simulate_main(cfg: DictConfig) -> dict:
-    """Run one state point from a composed ``simulate`` config; returns the run's summary."""
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    """Run one state point from a composed ``simulate`` config; returns the run's summary (simulate.py
+    has made the linear algebra single-threaded before anything loaded it)."""
     from hydra.core.hydra_config import HydraConfig
 
     from rheograph.runner import run_state_point

@@ -4,9 +4,10 @@ Output cadence: a time-series row each ``output_interval`` of strain, or - when 
 ``output_interval * jam_viscosity / stress`` of time (the time that strain interval would take at the jam
 viscosity), so that a shear-jammed state still produces rows and can be recognised: a row whose apparent
 viscosity sigma * dt / d(strain) exceeds ``jam_viscosity`` (or whose strain went backwards) is flagged
-``jammed``.  The run ends with status "jammed" when over its last ``jam_intervals`` rows together the
-apparent viscosity exceeds ``jam_viscosity`` (or the strain did not advance): with the default 10 rows,
-when the flow took longer than 0.1 strain would take at the jam viscosity and did not reach it.
+``jammed``.  The run ends with status "jammed" when over its last ``jam_intervals`` output intervals
+(between its last ``jam_intervals`` + 1 rows) together the apparent viscosity exceeds ``jam_viscosity``
+(or the strain did not advance): with the default 10 intervals, when the flow took longer than 0.1 strain
+would take at the jam viscosity and did not reach it.
 """
 
 from __future__ import annotations

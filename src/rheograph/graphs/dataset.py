@@ -38,7 +38,9 @@ log = logging.getLogger("rheograph.graphs")
 
 @dataclass(frozen=True)
 class GraphSettings:
-    """Everything that determines a graph and its targets (hashed into the cache directory name)."""
+    """Everything that determines a graph and its targets (hashed into the cache directory name, except
+    the three options that only say how the model reads the targets: ``pressure_per_stress``,
+    ``z_mu_on_count``, ``viscosity_on_solve``)."""
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = PAPER_EDGE_FEATURES
@@ -212,7 +214,7 @@ class SnapshotGraphDataset(InMemoryDataset):
 
     Cached in ``cache_dir/<hash>/processed``; the hash covers every graph setting and the files' paths,
     sizes and modification times, so changing either rebuilds the cache and nothing stale is reused.
-    ``run_files`` (the file of each run_id) is kept alongside.
+    ``files.json`` beside it lists the files in run_id order, for a person looking into the cache.
     """
 
     def __init__(self, files, settings: GraphSettings, cache_dir: str | Path):
@@ -230,7 +232,9 @@ class SnapshotGraphDataset(InMemoryDataset):
                 },
                 "files": _files_fingerprint(self.files),
                 "schema": SCHEMA_VERSION,
-                "version": 3,  # 3: jammed per snapshot (after the flow stopped), kept at any strain
+                # 3: jammed per snapshot (after the flow stopped), kept at any strain; 4: from the first row
+                # of the jam detector's window on (one row earlier than 3)
+                "version": 4,
             },
             sort_keys=True,
             default=list,

@@ -45,6 +45,7 @@ import dataclasses
 import numpy as np
 
 from rheograph.errors import InputError
+from rheograph.sim.contacts import SLIDE
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
 from rheograph.sim.integrator import SimState, Simulation
 from rheograph.sim.params import SimParams
@@ -64,7 +65,6 @@ PHYSICS_EDGE_FEATURES = (
 STRESS_EDGE_FEATURES = ("load", "frictional")
 HISTORY_EDGE_FEATURES = ("tangential_stretch", "sliding", "spring_shear")
 EDGE_FEATURES = PAPER_EDGE_FEATURES + PHYSICS_EDGE_FEATURES + STRESS_EDGE_FEATURES + HISTORY_EDGE_FEATURES
-SLIDE = 3  # rheograph.sim.contacts.SLIDE: the contact state of a spring at the Coulomb limit
 
 
 def overlap_unit(kn_coefficient: float) -> float:

@@ -3,10 +3,10 @@
 Splits (``split``): ``random`` shuffles snapshots (the seed paper's choice; snapshots of one trajectory are
 correlated, so test scores are optimistic) or ``grouped`` keeps every run (trajectory file) inside one
 fold — the honest estimate on trajectories the model has never seen — with the runs of each state point
-(phi, sigma) spread over consecutive folds, so that with >= 3 seeds per state point every stress is
-present in the training part of every fold.  Fold k is the test set, fold (k + 1) mod K the validation
-set (early stopping, checkpointing), the rest the training set.  Target and edge-feature standardisation
-are fitted on the training part only.
+(phi, sigma) spread over every other fold (f, f + 2, ...), so that with >= 3 seeds per state point every
+stress is present in the training part of every fold.  Fold k is the test set, fold (k + 1) mod K the
+validation set (early stopping, checkpointing), the rest the training set.  Target and edge-feature
+standardisation are fitted on the training part only.
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ class SnapshotDataModule(L.LightningDataModule):
             raise InputError(f"data.split={split!r} is invalid: allowed {SPLITS}")
         check_num_folds(num_folds)
         if not 0 <= fold < num_folds:
-            raise InputError(f"data.fold={fold} is invalid: allowed 0..{num_folds - 1}")
+            raise InputError(f"fold={fold} is invalid: allowed 0..{num_folds - 1}")
         if not 0.0 < train_fraction <= 1.0:
             raise InputError(f"data.train_fraction={train_fraction} is invalid: allowed (0, 1]")
         if batch_size < 1:

@@ -130,7 +130,8 @@ def _spread(values: torch.Tensor) -> torch.Tensor:
 
 
 class SurrogateModule(L.LightningModule):
-    """ResGCN + summed SmoothL1 (beta = 1) over standardised targets, Adam.
+    """ResGCN + weighted Huber loss (``huber_beta``) over standardised targets (η_r masked on jammed
+    snapshots), Adam.
 
     ``target_mean``/``target_std`` (fitted on the training fold) and the transform scales are buffers /
     hyperparameters, so a checkpoint alone maps graphs to physical eta_r, Pi, Z_mu.

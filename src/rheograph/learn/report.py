@@ -257,15 +257,13 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
     fig.savefig(run_dir / "mae_distribution.png", dpi=110)
     plt.close(fig)
 
-    try:  # the parity plot as a TensorBoard figure, next to the scalars
-        import matplotlib.image as mpimg
-        from torch.utils.tensorboard import SummaryWriter
+    # the figures in TensorBoard too, next to the scalars
+    import matplotlib.image as mpimg
+    from torch.utils.tensorboard import SummaryWriter
 
-        writer = SummaryWriter(str(run_dir / "tensorboard" / "report"))
-        for name in ("parity", "flow_curves", "mae_distribution"):
-            img = mpimg.imread(run_dir / f"{name}.png")[..., :3]
-            writer.add_image(f"report/{name}", img, dataformats="HWC")
-        writer.close()
-    except ImportError:  # tensorboard is a dependency; only a broken install lands here
-        pass
+    writer = SummaryWriter(str(run_dir / "tensorboard" / "report"))
+    for name in ("parity", "flow_curves", "mae_distribution"):
+        img = mpimg.imread(run_dir / f"{name}.png")[..., :3]
+        writer.add_image(f"report/{name}", img, dataformats="HWC")
+    writer.close()
     return run_dir / "report.md"

@@ -174,8 +174,9 @@ def train_fold(
 
 
 def _fold_process(cfg_yaml: str, run_dir: str, k: int) -> None:
-    """Entry of one fold process (``fold_workers`` > 1): one torch thread, results to ``run_dir``."""
-    os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+    """Entry of one fold process (``fold_workers`` > 1): one torch thread, results to ``run_dir``.  The
+    OpenMP wait policy is inherited from the parent's environment (set by the entry points before torch
+    loads: OpenMP reads it once)."""
     cfg = OmegaConf.create(cfg_yaml)
     torch.set_num_threads(1)
     logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
@@ -217,12 +218,12 @@ def folds_to_train(cfg: DictConfig) -> list[int]:
 
 def check_run_settings(cfg: DictConfig) -> None:
     """How a run trains, refused by name before any work: an epoch budget of at least one (the cosine
-    schedule spans it: Lightning's -1 for "unlimited" would make it oscillate), threads >= 0 (0: the
-    cores this process may use), fold processes >= 1."""
+    schedule spans it: Lightning's -1 for "unlimited" would make it oscillate), threads >= 1 or null
+    (null: the cores this process may use, at most 2), fold processes >= 1."""
     epochs = cfg.trainer.get("max_epochs")
     if not isinstance(epochs, int) or epochs < 1:
         raise InputError(f"trainer.max_epochs={epochs} is invalid: allowed an integer >= 1")
-    for key, low in (("threads", 0), ("fold_workers", 1)):
+    for key, low in (("threads", 1), ("fold_workers", 1)):
         value = cfg.get(key)
         if value is not None and (not isinstance(value, int) or value < low):
             raise InputError(f"{key}={value} is invalid: allowed an integer >= {low}")
@@ -235,11 +236,10 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     ``fold_callbacks(position, k)`` (the hyperparameter search) returns extra Lightning callbacks for the
     ``position``-th trained fold ``k``; folds then train in this process, one after the other.
     """
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     check_run_settings(cfg)
     # default: the cores this process may run on (taskset, a SLURM cpuset), at most 2 — not the machine's
     usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    threads = int(cfg.get("threads") or 0) or max(1, min(2, usable))
+    threads = cfg.get("threads") or max(1, min(2, usable))
     torch.set_num_threads(threads)
     ensure_dataset(cfg)
     settings = graph_settings(cfg)

@@ -42,7 +42,7 @@ class SimParams:
     strain: float = 5.0  # total strain to run
     size_ratio: float = 1.4  # large / small radius
     mu: float = 0.5  # friction coefficient (CLM), 0 for frictionless
-    critical_load: float = 1.0  # F_CL in force units (the unit itself; kept explicit for clarity)
+    critical_load: float = 1.0  # F_CL, the unit of force: always 1 (kept explicit for the CLM's formulas)
     lub_max_gap: float = 0.5  # lubrication cut-off, reduced gap h / a_bar
     delta: float = 1e-3  # lubrication regularisation (h_min / a_bar)
     kn_coefficient: float = 2e4  # k_n = kn_coefficient * (sigma/sigma0) / (6 pi)  [F_CL / a^2]
@@ -134,7 +134,8 @@ class SimParams:
         check("size_ratio", 1.0 <= self.size_ratio <= 10.0, "1 <= size_ratio <= 10")
         check("strain", self.strain > 0.0, "strain > 0")
         check("mu", self.mu >= 0.0, "mu >= 0")
-        check("critical_load", self.critical_load > 0.0, "critical_load > 0")
+        # F_CL is the force unit: sigma0 = F_CL / (6 pi a^2), k_n and the graph features' loads are in it
+        check("critical_load", self.critical_load == 1.0, "1 (F_CL is the unit of force)")
         check("lub_max_gap", 0.0 < self.lub_max_gap < 1.0, "0 < lub_max_gap < 1")
         check("delta", 0.0 < self.delta < 0.1, "0 < delta < 0.1")
         check("kn_coefficient", self.kn_coefficient > 0.0, "kn_coefficient > 0")

@@ -1,4 +1,5 @@
-"""Particle stress: lubrication stresslets, contact (spring + dashpot) virial, solvent.
+"""Particle stress: lubrication stresslets, contact (spring + dashpot) virial (the solvent's 2 eta0 E is
+added by the integrator).
 
 Stresslets are in F_CL * a per unit thickness; dividing by the box area Lx*Ly and multiplying by 6 pi
 converts to sigma0 = F_CL / (6 pi a^2) (see ``stress_unit_factor``).  Tensors are stored as
@@ -8,6 +9,7 @@ converts to sigma0 = F_CL / (6 pi a^2) (see ``stress_unit_factor``).  Tensors ar
 import numpy as np
 from numba import njit
 
+from rheograph.sim.contacts import NONE
 from rheograph.sim.lubrication import XG, XM, YG, YM, contact_block
 
 
@@ -148,7 +150,7 @@ def spring_stress(pair_i, nvec, r, f_on_i, state, full):
     """Contact-spring virial sum of sym(r_ij (x) F_ij) as (xx, xy, yy)."""
     out = np.zeros(3)
     for p in range(pair_i.shape[0]):
-        if state[p] == 0:
+        if state[p] == NONE:
             continue
         nx = nvec[p, 0]
         ny = nvec[p, 1]
