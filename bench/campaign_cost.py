@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.collect import read_index
 from rheograph.dataset_card import run_cpu_seconds
 from rheograph.io.hdf5 import read_run_info
+from rheograph.io.index import read_index
 from rheograph.sim.params import scheme_name
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

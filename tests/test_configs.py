@@ -115,7 +115,7 @@ def test_folds_to_train_accepts_all_one_or_a_list_and_names_the_range():
 def test_leave_one_phi_out_has_one_fold_per_committed_area_fraction():
     """The pooled experiment runs on the committed index: one fold per area fraction it holds at its
     system size (a stale count stops every fold with the data.num_folds message)."""
-    from rheograph.collect import read_index
+    from rheograph.io.index import read_index
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=["experiment=pooled_leave_phi_out"])

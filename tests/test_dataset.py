@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from rheograph.collect import read_index
+from rheograph.io.index import read_index
 
 ROOT = Path(__file__).resolve().parents[1]
 INDEX = ROOT / "data" / "paper" / "index.json"

@@ -286,8 +286,8 @@ def test_a_file_of_another_schema_or_without_checkpoint_is_refused_untouched(tmp
     ],
 )
 def test_an_index_that_is_not_one_is_refused_by_name(tmp_path, text, match):
-    from rheograph.collect import read_index
     from rheograph.errors import InputError
+    from rheograph.io.index import read_index
 
     path = tmp_path / "index.json"
     path.write_text(text)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rheograph.collect import build_index, index_files, write_index
+from rheograph.io.index import build_index, index_files, write_index
 from rheograph.learn.datamodule import expand_files
 
 ROOT = Path(__file__).resolve().parents[1]

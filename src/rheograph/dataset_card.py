@@ -19,9 +19,9 @@ import h5py
 import numpy as np
 
 from rheograph.analysis import decorrelation_strain, jammed_snapshots, transient_strain
-from rheograph.collect import USABLE, build_index, write_index
 from rheograph.errors import InputError, one_line_errors
 from rheograph.flowcurve import collect
+from rheograph.io.index import USABLE, build_index, write_index
 from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
@@ -203,7 +203,7 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
             "resumed by the command above) with "
             f"{sum(r['n_snapshots'] for r in unfinished)} snapshot(s) so far, counted in CPU hours and MB "
             "but not in the snapshot columns; the learning reads finished runs only "
-            "(`rheograph.collect.USABLE`)."
+            "(`rheograph.io.index.USABLE`)."
             if unfinished
             else ""
         ),

@@ -253,7 +253,7 @@ def trajectory_param(path: str, key: str) -> float:
 
 def expand_files(files) -> list[str]:
     """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.collect``) into a sorted list."""
-    from rheograph.collect import index_files
+    from rheograph.io.index import index_files
 
     patterns = [files] if isinstance(files, str) else list(files)
     out = set()
