@@ -133,13 +133,17 @@ def publish(section: str, text: str, write: bool) -> None:
         write_section(ROOT / "docs" / "benchmarks.md", section, text)
 
 
-def write_section(path: Path, name: str, body: str) -> None:
-    """Replace the text between <!-- name:start --> and <!-- name:end --> (appending it if absent)."""
+def write_section(path: Path, name: str, body: str, insert_before: str | None = None) -> None:
+    """Replace the text between <!-- name:start --> and <!-- name:end -->; the first time, insert the
+    block just before the line starting with ``insert_before`` (a heading), or append it."""
     start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
     text = path.read_text() if path.exists() else "# Benchmarks\n"
     block = f"{start}\n{body}\n{end}"
     if start in text:
         text = text[: text.index(start)] + block + text[text.index(end) + len(end) :]
+    elif insert_before and f"\n{insert_before}" in text:
+        at = text.index(f"\n{insert_before}") + 1
+        text = text[:at] + block + "\n\n" + text[at:]
     else:
         text = text.rstrip() + "\n\n" + block + "\n"
     path.write_text(text)

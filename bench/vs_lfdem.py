@@ -54,6 +54,9 @@ import numpy as np
 
 from rheograph.io.hdf5 import POSITION_DECIMALS
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import write_section  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "vs_lfdem"
 INSERT_BEFORE = "## 4. Surrogate accuracy"  # where the section goes the first time it is written
@@ -377,22 +380,6 @@ def table(rows: list[dict], lfdem_disps: list[float]) -> list[str]:
     return lines
 
 
-def write_section(path: Path, name: str, body: str) -> None:
-    """Replace the text between <!-- name:start --> and <!-- name:end -->; the first time, insert the
-    block just before the ``INSERT_BEFORE`` heading (or append it)."""
-    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    block = f"{start}\n{body}\n{end}"
-    if start in text:
-        text = text[: text.index(start)] + block + text[text.index(end) + len(end) :]
-    elif f"\n{INSERT_BEFORE}" in text:
-        at = text.index(f"\n{INSERT_BEFORE}") + 1
-        text = text[:at] + block + "\n\n" + text[at:]
-    else:
-        text = text.rstrip() + "\n\n" + block + "\n"
-    path.write_text(text)
-
-
 def find_binary(given: str | None) -> tuple[Path | None, str]:
     candidate = given or os.environ.get("LFDEM_BINARY")
     if not candidate:
@@ -478,7 +465,7 @@ def main(argv=None) -> int:
         ]
         print("\n".join(lines), flush=True)
         if not args.no_write:
-            write_section(ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines))
+            write_section(ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines), INSERT_BEFORE)
     return 0
 
 
