@@ -28,6 +28,7 @@ from simulate_speed import publish  # noqa: E402
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 from rheograph.learn.module import fold_metrics  # noqa: E402
+from rheograph.naming import state_point_key  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCORES = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
@@ -64,7 +65,7 @@ def fold_scores(run_dirs: list[Path], k: int) -> tuple[list[dict], dict]:
             np.array_equal(other["true"], first["true"]) and np.array_equal(other["run_id"], first["run_id"])
         ):
             raise SystemExit(f"fold {k}: the runs were tested on different graphs (not the same folds)")
-    groups = first["phi"] * 1e6 + first["stress"]
+    groups = state_point_key(first["phi"], first["stress"])
     members = [fold_metrics(p["pred"], p["true"], groups, p["jammed"]) for p in loaded]
     mean = fold_metrics(ensemble_mean([p["pred"] for p in loaded]), first["true"], groups, first["jammed"])
     return members, mean

@@ -4,6 +4,16 @@ for it."""
 
 from __future__ import annotations
 
+import numpy as np
+
+
+def state_point_key(phi, stress):
+    """One number per (phi, sigma/sigma0) state point, to group snapshots (scalars or arrays):
+    round(phi, 6) * 1e6 + round(sigma/sigma0, 6), distinct for every sigma/sigma0 < 1e4."""
+    return np.round(np.asarray(phi, dtype=np.float64), 6) * 1e6 + np.round(
+        np.asarray(stress, dtype=np.float64), 6
+    )
+
 
 def sim_id(n_particles, phi, stress, seed, disp_max, integrator, lagged_step_control=False) -> str:
     """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended

@@ -20,19 +20,16 @@ import numpy as np
 
 from rheograph.graphs.features import COMPUTED_GRAPH_INPUTS
 from rheograph.learn.module import physical_targets
-
-
-def _state_points(phi: np.ndarray, stress: np.ndarray) -> np.ndarray:
-    return np.round(np.asarray(phi, dtype=np.float64), 6) * 1e6 + np.round(np.asarray(stress), 6)
+from rheograph.naming import state_point_key
 
 
 def stress_mean(train: dict, test: dict) -> np.ndarray:
     """Transformed prediction (G, 3): the training mean at the same (phi, sigma); a state point absent
     from training takes the mean of the nearest log(sigma) at the same phi (else the global mean)."""
-    keys = _state_points(train["phi"], train["stress"])
+    keys = state_point_key(train["phi"], train["stress"])
     out = np.empty((len(test["stress"]), train["y"].shape[1]))
     for g, (phi, sigma) in enumerate(zip(test["phi"], test["stress"])):
-        same = keys == _state_points(phi, sigma)
+        same = keys == state_point_key(phi, sigma)
         if not same.any():
             at_phi = np.isclose(train["phi"], phi)
             if at_phi.any():

@@ -23,6 +23,7 @@ from torch_geometric.loader import DataLoader
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
 from rheograph.learn.jamming import fit_jam_map
+from rheograph.naming import state_point_key
 
 SPLITS = ("random", "grouped", "phi")
 
@@ -134,7 +135,7 @@ class SnapshotDataModule(L.LightningDataModule):
         index = np.arange(len(dataset))
         self.dataset = dataset
         runs = dataset.run_id.numpy()
-        state_points = np.round(dataset.phi.numpy(), 6) * 1e6 + np.round(dataset.stress.numpy(), 6)
+        state_points = state_point_key(dataset.phi.numpy(), dataset.stress.numpy())
         if self.split == "phi":
             # leave one area fraction out: fold k tests the k-th phi; validation = one in five of the
             # other phi's trajectories (stratified like the grouped split), training = the rest

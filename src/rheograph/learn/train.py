@@ -20,6 +20,7 @@ from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
 from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
+from rheograph.naming import state_point_key
 
 log = logging.getLogger("rheograph.train")
 
@@ -158,7 +159,7 @@ def train_fold(
     result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
     jam = jam_rule_scores(dm.domain["jam_map"], meta["phi"], meta["stress"], meta["run_id"], meta["jammed"])
     result.update({f"test/{name}": value for name, value in jam.items()})
-    groups = meta["phi"] * 1e6 + meta["stress"]
+    groups = state_point_key(meta["phi"], meta["stress"])
     for name, value in fold_metrics(pred, true, groups, meta["jammed"]).items():
         result[f"test/{name}"] = value
     for model_name, model_pred in baselines.items():
