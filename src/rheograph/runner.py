@@ -12,7 +12,6 @@ would take at the jam viscosity and did not reach it.
 
 from __future__ import annotations
 
-import json
 import math
 import signal
 import time as wallclock
@@ -24,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
-from rheograph.io.hdf5 import RESUMABLE_PARAMS, TrajectoryFile, is_compact, rewrite
+from rheograph.io.hdf5 import TrajectoryFile, is_compact, params_that_differ, read_run_info, rewrite
 from rheograph.sim.integrator import Simulation, particle_pressure, viscosity
 from rheograph.sim.params import SimParams
 
@@ -99,19 +98,14 @@ def finished_outcome(path: Path, params: SimParams) -> RunOutcome | None:
     without opening the file for writing — rerunning a sweep leaves finished files byte for byte as they
     were; None when the run has to continue (or the file needs ``open_existing``'s checks and messages)."""
     try:
-        with h5py.File(path, "r") as h5:
-            status = str(h5.attrs["status"])
-            stored = json.loads(h5.attrs["params"])
-            strain = float(h5["checkpoint"].attrs["strain"])
-            steps = int(h5["checkpoint"].attrs["steps"])
-            summary = dict(h5["summary"].attrs) if "summary" in h5 else {}
+        info = read_run_info(path)
     except (OSError, KeyError):
         return None
-    defaults, mine = SimParams.defaults(), params.to_dict()
-    if any(k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k] for k in mine):
+    if params_that_differ(info["params"], params):
         return None
+    status, strain = info["status"], info["strain"]
     if status == "jammed" or (status == "completed" and strain >= params.strain):
-        return RunOutcome(status, strain, steps, 0.0, summary, already_finished=True)
+        return RunOutcome(status, strain, info["steps"], 0.0, info["summary"], already_finished=True)
     return None
 
 

@@ -192,11 +192,7 @@ class TrajectoryFile:
             )
         stored = json.loads(h5.attrs["params"])
         mine = self.params.to_dict()
-        # a parameter added after the file was written had its default value there
-        defaults = SimParams.defaults()
-        differ = sorted(
-            k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k]
-        )
+        differ = params_that_differ(stored, self.params)
         if differ:
             h5.close()
             detail = ", ".join(f"{k}: file {stored.get(k)!r} vs requested {mine[k]!r}" for k in differ)
@@ -290,14 +286,24 @@ def read_timeseries(path: str | Path) -> dict:
         return {name: h5["timeseries"][name][()] for name in h5["timeseries"]}
 
 
+def params_that_differ(stored: dict, params: SimParams) -> list[str]:
+    """Names of the parameters of ``params`` that differ from those ``stored`` in a trajectory file, other
+    than RESUMABLE_PARAMS: a file of another state point.  A parameter added after the file was written
+    had its default value there."""
+    defaults, mine = SimParams.defaults(), params.to_dict()
+    return sorted(k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k])
+
+
 def read_run_info(path: str | Path) -> dict:
-    """Status, parameters and summary of a trajectory file."""
+    """Status, parameters, summary and progress (strain and steps at the checkpoint) of a trajectory
+    file, read only."""
     with h5py.File(path, "r") as h5:
         return {
-            "status": h5.attrs["status"],
+            "status": str(h5.attrs["status"]),
             "params": json.loads(h5.attrs["params"]),
             "summary": dict(h5["summary"].attrs) if "summary" in h5 else {},
             "strain": float(h5["checkpoint"].attrs["strain"]),
+            "steps": int(h5["checkpoint"].attrs["steps"]),
             "solver": h5.attrs.get("solver"),  # None in files written before the backend was recorded
         }
 
