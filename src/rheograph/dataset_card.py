@@ -11,6 +11,7 @@ and ``index.json`` (``rheograph.collect``) into the data directory.
 from __future__ import annotations
 
 import argparse
+import json
 import re
 from collections import defaultdict
 from pathlib import Path
@@ -47,8 +48,9 @@ def cpu_seconds_per_decorrelated_snapshot(path: str | Path) -> float:
     with h5py.File(path, "r") as h5:
         strain = float(h5["checkpoint"].attrs["strain"])
         ts = h5["timeseries"]
-        steady = ts["strain"][()] >= float(h5.attrs["param_steady_state_strain"])
-        interval = float(h5.attrs["param_output_interval"])
+        params = json.loads(h5.attrs["params"])
+        steady = ts["strain"][()] >= float(params["steady_state_strain"])
+        interval = float(params["output_interval"])
         tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
     return run_cpu_seconds(path) / strain * max(tau, interval)
 

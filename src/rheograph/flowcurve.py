@@ -22,7 +22,7 @@ import numpy as np
 
 from rheograph.analysis import read_lfdem_data, steady_state_summary
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.hdf5 import read_run_info, read_timeseries
+from rheograph.io.hdf5 import PRODUCER, read_run_info, read_timeseries
 from rheograph.sim.params import scheme_name
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")
@@ -34,7 +34,7 @@ PARTIAL_OR_DONE = ("completed", "wall_limit", "interrupted")
 def _is_trajectory(path: Path) -> bool:
     try:
         with h5py.File(path, "r") as h5:
-            return h5.attrs.get("producer") == "rheograph"
+            return h5.attrs.get("producer") == PRODUCER
     except OSError:
         return False
 

@@ -29,7 +29,7 @@ from rheograph.graphs.features import (
     snapshot_edges,
     solve_viscosity,
 )
-from rheograph.io.hdf5 import SCHEMA_VERSION
+from rheograph.io.hdf5 import PRODUCER, SCHEMA_VERSION
 from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
@@ -120,10 +120,7 @@ def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> l
             "that state point"
         ) from exc
     with h5:
-        if (
-            h5.attrs.get("producer") != "rheograph"
-            or int(h5.attrs.get("schema_version", -1)) != SCHEMA_VERSION
-        ):
+        if h5.attrs.get("producer") != PRODUCER or int(h5.attrs.get("schema_version", -1)) != SCHEMA_VERSION:
             raise InputError(f"{path}: not a rheograph trajectory of schema {SCHEMA_VERSION}")
         params = json.loads(h5.attrs["params"])
         status = str(h5.attrs.get("status", ""))

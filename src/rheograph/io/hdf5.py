@@ -294,6 +294,12 @@ def params_that_differ(stored: dict, params: SimParams) -> list[str]:
     return sorted(k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k])
 
 
+def read_params(path: str | Path) -> dict:
+    """The simulation parameters (``SimParams.to_dict``) a trajectory file was written with."""
+    with h5py.File(path, "r") as h5:
+        return json.loads(h5.attrs["params"])
+
+
 def read_run_info(path: str | Path) -> dict:
     """Status, parameters, summary and progress (strain and steps at the checkpoint) of a trajectory
     file, read only."""

@@ -239,12 +239,11 @@ def thin_snapshots(idx: np.ndarray, runs: np.ndarray, fraction: float) -> np.nda
 
 
 def trajectory_param(path: str, key: str) -> float:
-    """A simulation parameter of a trajectory file (its ``param_<key>`` attribute)."""
-    import h5py
+    """A simulation parameter of a trajectory file."""
+    from rheograph.io.hdf5 import read_params
 
     try:
-        with h5py.File(path, "r") as h5:
-            return float(h5.attrs[f"param_{key}"])
+        return float(read_params(path)[key])
     except (OSError, KeyError) as exc:
         raise InputError(
             f"{path}: cannot read its parameter {key} ({exc}); a file still being written by a simulation "

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
@@ -57,11 +56,10 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
 
 
 def _trajectory_params(path) -> dict:
-    import h5py
+    from rheograph.io.hdf5 import read_params
 
     try:
-        with h5py.File(path, "r") as h5:
-            return json.loads(h5.attrs["params"])
+        return read_params(path)
     except (OSError, KeyError) as exc:
         raise InputError(
             f"{path}: not a readable rheograph trajectory ({exc}); check the path, or move a truncated "
