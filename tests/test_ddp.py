@@ -13,7 +13,6 @@ from rheograph.learn.train import train_folds
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.slow
 def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
     """Same seed and initial weights, a vanishing learning rate and one epoch: the test metrics of the
     trained model must agree between 1 and 2 processes (without batch normalisation the only difference

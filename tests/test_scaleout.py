@@ -5,8 +5,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from rheograph.io.index import build_index, index_files, write_index
 from rheograph.learn.datamodule import expand_files
 
@@ -44,7 +42,6 @@ def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path
     assert expand_files(str(path)) == sorted(str(f.resolve()) for f in files)
 
 
-@pytest.mark.slow
 def test_submitit_local_launcher_runs_a_simulation(tmp_path):
     cmd = [
         sys.executable,

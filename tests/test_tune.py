@@ -14,7 +14,6 @@ from rheograph.learn.tune import check_study_space, make_objective, run_study
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.slow
 def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
     train_overrides = [
         *tiny_training_overrides(tiny_files, tmp_path),
