@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from rheograph.io.hdf5 import TrajectoryFileError, read_run_info, read_timeseries
+from rheograph.io.hdf5 import TrajectoryFileError, is_compact, read_run_info, read_timeseries
 from rheograph.runner import run_state_point
 from rheograph.sim.params import ParameterError, SimParams
 
@@ -154,6 +154,30 @@ def test_finished_runs_are_compressed_at_rest_and_extend_like_raw_ones(tmp_path)
     a, b = read_timeseries(ref), read_timeseries(packed)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_an_interrupted_run_compacted_for_committing_resumes_to_the_uninterrupted_run(tmp_path):
+    """``collect --compress`` also compacts interrupted runs (committed between sessions); the resume
+    writes the file raw again and continues: time series and snapshots equal an uninterrupted run's."""
+    from rheograph.collect import main as collect_main
+
+    params = SimParams(**TINY)
+    ref, cut = tmp_path / "ref" / "run.h5", tmp_path / "cut" / "run.h5"
+    ref.parent.mkdir()
+    cut.parent.mkdir()
+    run_state_point(params, ref, progress=False)
+    assert run_state_point(params, cut, progress=False, max_steps=45).status == "interrupted"
+    raw_size = cut.stat().st_size
+    collect_main([str(cut.parent), "--out", str(tmp_path / "index.json"), "--compress"])
+    with h5py.File(cut) as h5:
+        assert is_compact(h5) and h5.attrs["status"] == "interrupted"
+    assert cut.stat().st_size < raw_size
+    assert run_state_point(params, cut, progress=False).status == "completed"
+    a, b = read_timeseries(ref), read_timeseries(cut)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    with h5py.File(ref) as h1, h5py.File(cut) as h2:
+        np.testing.assert_array_equal(h1["snapshots/positions"][()], h2["snapshots/positions"][()])
 
 
 def test_the_compact_layout_keeps_what_the_learning_and_a_resume_need(tmp_path):

@@ -27,8 +27,9 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--compress",
         action="store_true",
-        help="rewrite finished runs into the compact at-rest layout (rheograph.io.hdf5.AT_REST) that "
-        "files finished by older versions lack",
+        help="rewrite every trajectory that no simulation is writing into the compact at-rest layout "
+        "(rheograph.io.hdf5.AT_REST): finished runs, and interrupted ones before they are committed "
+        "(~4x smaller; a resume writes them raw again first)",
     )
     args = ap.parse_args(argv)
     missing = [d for d in args.directories if not Path(d).is_dir()]
@@ -38,16 +39,15 @@ def main(argv=None) -> None:
     if args.compress:
         saved = 0
         for entry in index["runs"]:
-            if entry["status"] in USABLE:
-                try:
-                    with h5py.File(entry["path"], "r") as h5:
-                        if is_compact(h5):
-                            continue
-                    before, after = rewrite(entry["path"], compressed=True)
-                except OSError as exc:  # being written by a running simulation (HDF5 file lock)
-                    print(f"  not compacted {entry['path']}: {exc}")
-                    continue
-                saved += before - after
+            try:
+                with h5py.File(entry["path"], "r") as h5:
+                    if is_compact(h5):
+                        continue
+                before, after = rewrite(entry["path"], compressed=True)
+            except OSError as exc:  # being written by a running simulation (HDF5 file lock)
+                print(f"  not compacted {entry['path']}: {exc}")
+                continue
+            saved += before - after
         print(f"compacted: {saved / 1e6:.1f} MB saved")
     write_index(index, args.out)
     usable = sum(e["status"] in USABLE for e in index["runs"])
