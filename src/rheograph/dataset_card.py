@@ -84,20 +84,17 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
         flowing = entry["status"] != "jammed"
         records.append(
             dict(
-                path=str(path),
                 n=p["n_particles"],
                 phi=p["phi"],
                 stress=p["stress"],
                 seed=p["seed"],
                 status=entry["status"],
-                strain=entry["strain"],
                 snapshots=snaps,
                 arrested=arrested,
                 n_snapshots=int(flowing_snaps.sum() + jammed.sum()),
                 n_flowing_snapshots=int(flowing_snaps.sum()),
                 n_jammed_snapshots=int(jammed.sum()),
                 snapshot_interval=p["snapshot_interval"],
-                flowing=flowing,
                 decorrelation={
                     k: decorrelation_strain(v[steady], p["output_interval"]) if flowing else np.nan
                     for k, v in series.items()
@@ -279,6 +276,16 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         "|---|---|---|---|",
         *jam_lines,
         "",
+        "## Thickening: continuous or discontinuous",
+        "",
+        "From the flow-curve means below (γ̇ = σ/η_r): a steady shear rate that falls while the stress "
+        "rises is the S-shaped flow curve of discontinuous shear thickening; stresses where no seed flows "
+        "are shear jammed.",
+        "",
+        "| N | φ | thickening | σ/σ0 where γ̇ falls | σ/σ0 with no flowing seed |",
+        "|---|---|---|---|---|",
+        *thickening_lines(points),
+        "",
         "## Flow curves (steady means over seeds ± standard error)",
         "",
         "| N | φ | σ/σ0 | seeds | η_r | Π / σ0 | Z_μ |",
@@ -297,12 +304,14 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         "",
         "## Figures",
         "",
-        "Seed paper Fig. 2 (one point per snapshot; η_r against σ/σ0 and against γ̇/γ̇0, Π and Z_μ "
-        "against σ/σ0):",
+        "Seed paper Fig. 2, one row per N (one point per flowing snapshot after the transient; crosses: "
+        "arrested packings, Π and Z_μ only; lines: the steady means of the table above; η_r against σ/σ0 "
+        "and against γ̇/γ̇0 — where the line bends back, the S-shape —, Π and Z_μ against σ/σ0):",
         "",
         "![fig2](figures/dataset_fig2.png)",
         "",
-        "Seed paper Fig. 3 (density of η_r and Π against Z_μ per φ, with marginals):",
+        "Seed paper Fig. 3 (density of η_r and Π against Z_μ per φ, flowing snapshots of both N, with "
+        "the marginals of Z_μ above and of η_r or Π beside):",
         "",
         "![fig3](figures/dataset_fig3.png)",
         "",
@@ -310,66 +319,130 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
     return "\n".join(lines)
 
 
-def plot_fig2(records: list[dict], path: Path) -> None:
+def thickening_lines(points: list[dict]) -> list[str]:
+    """Per (N, phi): where the steady shear rate falls while the stress rises -- the S-shaped flow curve of
+    discontinuous shear thickening -- and where no seed flows any more (shear jammed), from the flow-curve
+    means (gamma_dot = sigma / eta_r)."""
+    by_n_phi = defaultdict(list)
+    for pt in points:
+        by_n_phi[(pt["n_particles"], pt["phi"])].append(pt)
+    lines = []
+    for (n, phi), pts in sorted(by_n_phi.items()):
+        pts = sorted(pts, key=lambda q: q["stress"])
+        rate = {q["stress"]: q["stress"] / q["viscosity"] for q in pts if np.isfinite(q["viscosity"])}
+        flowing = sorted(rate)
+        falls = [
+            f"{a:g} → {b:g} (γ̇ {rate[a]:.3g} → {rate[b]:.3g})"
+            for a, b in zip(flowing, flowing[1:])
+            if rate[b] < rate[a]
+        ]
+        stopped = [q["stress"] for q in pts if q["jammed"] and not np.isfinite(q["viscosity"])]
+        kind = "discontinuous (S-shape)" if falls else "continuous"
+        lines.append(
+            f"| {n} | {phi:.2f} | {kind} | {', '.join(falls) or '–'} | "
+            f"{', '.join(f'{s:g}' for s in stopped) or 'none'} |"
+        )
+    return lines
+
+
+def _flow_curve(points, n, phi, key):
+    """(stresses, steady means) of one (N, phi) flow curve, NaN-free."""
+    pts = sorted((q for q in points if q["n_particles"] == n and q["phi"] == phi), key=lambda q: q["stress"])
+    s = np.array([q["stress"] for q in pts])
+    v = np.array([q[key] for q in pts])
+    ok = np.isfinite(v)
+    return s[ok], v[ok]
+
+
+def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
+    """Seed paper Fig. 2, one row per N: flowing snapshots as dots, arrested packings (jammed snapshots:
+    Π and Z_μ only) as crosses, the steady flow-curve means as lines."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    ns = sorted({r["n"] for r in records})
     phis = sorted({r["phi"] for r in records})
-    colours = plt.cm.viridis(np.linspace(0, 0.9, len(phis)))
-    fig, axes = plt.subplots(1, 4, figsize=(17, 4.2))
-    for phi, colour in zip(phis, colours):
-        runs = [r for r in records if r["phi"] == phi and r["n_flowing_snapshots"]]
-        if not runs:
-            continue
-        s = np.concatenate([np.full(r["n_flowing_snapshots"], r["stress"]) for r in runs])
-        jitter = np.exp(np.random.default_rng(0).normal(0, 0.03, s.size))
-        snap = {k: np.concatenate([r["snapshots"][k] for r in runs]) for k in (*TARGETS, "shear_rate")}
-        kw = dict(s=4, alpha=0.4, color=colour)
-        axes[0].scatter(s * jitter, snap["viscosity"], label=f"φ = {phi:.2f}", **kw)
-        axes[1].scatter(snap["shear_rate"], snap["viscosity"], **kw)
-        axes[2].scatter(s * jitter, snap["pressure"], **kw)
-        axes[3].scatter(s * jitter, snap["z_mu"], **kw)
-    labels = [("σ/σ0", "η_r"), ("γ̇/γ̇0", "η_r"), ("σ/σ0", "Π/σ0"), ("σ/σ0", "Z_μ")]
-    for ax, (xl, yl) in zip(axes, labels):
-        ax.set_xscale("log")
-        ax.set_xlabel(xl)
-        ax.set_ylabel(yl)
-        if yl != "Z_μ":
-            ax.set_yscale("log")
-    axes[0].legend(fontsize=8, markerscale=3)
+    colours = dict(zip(phis, plt.cm.viridis(np.linspace(0, 0.9, len(phis)))))
+    fig, grid = plt.subplots(len(ns), 4, figsize=(17, 4.0 * len(ns)), squeeze=False)
+    rng = np.random.default_rng(0)
+    for axes, n in zip(grid, ns):
+        for phi in phis:
+            colour = colours[phi]
+            runs = [r for r in records if r["n"] == n and r["phi"] == phi and r["status"] in USABLE]
+            if not runs:
+                continue
+            flowing = [r for r in runs if r["n_flowing_snapshots"]]
+            if flowing:
+                s = np.concatenate([np.full(r["n_flowing_snapshots"], r["stress"]) for r in flowing])
+                s = s * np.exp(rng.normal(0, 0.03, s.size))  # jitter: points of one stress side by side
+                keys = (*TARGETS, "shear_rate")
+                snap = {k: np.concatenate([r["snapshots"][k] for r in flowing]) for k in keys}
+                kw = dict(s=4, alpha=0.35, color=colour)
+                axes[0].scatter(s, snap["viscosity"], label=f"φ = {phi:.2f}", **kw)
+                axes[1].scatter(snap["shear_rate"], snap["viscosity"], **kw)
+                axes[2].scatter(s, snap["pressure"], **kw)
+                axes[3].scatter(s, snap["z_mu"], **kw)
+            arrested = [r for r in runs if r["n_jammed_snapshots"]]
+            if arrested:
+                s = np.concatenate([np.full(r["n_jammed_snapshots"], r["stress"]) for r in arrested])
+                kw = dict(s=30, marker="x", color=colour, linewidths=1.2)
+                axes[2].scatter(s, np.concatenate([r["arrested"]["pressure"] for r in arrested]), **kw)
+                axes[3].scatter(s, np.concatenate([r["arrested"]["z_mu"] for r in arrested]), **kw)
+            stress, eta = _flow_curve(points, n, phi, "viscosity")
+            axes[0].plot(stress, eta, "-", color=colour, lw=1.5)
+            axes[1].plot(stress / eta, eta, "-", color=colour, lw=1.5)
+            for ax, key in ((axes[2], "pressure"), (axes[3], "z_mu")):
+                ax.plot(*_flow_curve(points, n, phi, key), "-", color=colour, lw=1.5)
+        labels = [("σ/σ0", "η_r"), ("γ̇/γ̇0", "η_r"), ("σ/σ0", "Π/σ0"), ("σ/σ0", "Z_μ")]
+        for ax, (xl, yl) in zip(axes, labels):
+            ax.set_xscale("log")
+            ax.set_xlabel(xl)
+            ax.set_ylabel(yl)
+            if yl != "Z_μ":
+                ax.set_yscale("log")
+        axes[0].set_title(f"N = {n}", loc="left", fontsize=10)
+        axes[3].set_title("×: arrested (jammed) packings; lines: steady means", fontsize=8)
+        axes[0].legend(fontsize=8, markerscale=3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
 def plot_fig3(records: list[dict], path: Path) -> None:
+    """Seed paper Fig. 3: density of log η_r and log Π against Z_μ per φ (flowing snapshots, all N),
+    with the marginal of Z_μ above and of η_r or Π beside each panel."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     phis = sorted({r["phi"] for r in records})
-    fig = plt.figure(figsize=(3.6 * len(phis), 7.2))
-    grid = fig.add_gridspec(4, len(phis), height_ratios=[1, 3, 1, 3], hspace=0.35, wspace=0.3)
+    fig = plt.figure(figsize=(4.4 * len(phis), 7.4))
+    ratios = dict(height_ratios=[1, 3, 1, 3], width_ratios=[3, 1] * len(phis))
+    grid = fig.add_gridspec(4, 2 * len(phis), hspace=0.5, wspace=0.35, **ratios)
     for col, phi in enumerate(phis):
-        runs = [r for r in records if r["phi"] == phi and r["n_flowing_snapshots"]]
+        runs = [r for r in records if r["phi"] == phi and r["n_flowing_snapshots"] and r["status"] in USABLE]
         if not runs:
             continue
         z = np.concatenate([r["snapshots"]["z_mu"] for r in runs])
         for row, key in ((1, "viscosity"), (3, "pressure")):
             v = np.concatenate([r["snapshots"][key] for r in runs])
             ok = v > 0
-            main = fig.add_subplot(grid[row, col])
-            top = fig.add_subplot(grid[row - 1, col], sharex=main)
-            main.hist2d(z[ok], np.log10(v[ok]), bins=30, cmap="magma_r")
+            logv = np.log10(v[ok])
+            main = fig.add_subplot(grid[row, 2 * col])
+            top = fig.add_subplot(grid[row - 1, 2 * col], sharex=main)
+            side = fig.add_subplot(grid[row, 2 * col + 1], sharey=main)
+            main.hist2d(z[ok], logv, bins=30, cmap="magma_r")
             top.hist(z[ok], bins=30, color="grey")
+            side.hist(logv, bins=30, color="grey", orientation="horizontal")
             top.set_title(f"φ = {phi:.2f}" if row == 1 else "", fontsize=9)
             top.tick_params(labelbottom=False)
+            side.tick_params(labelleft=False)
             main.set_xlabel("Z_μ")
             main.set_ylabel("log10 η_r" if key == "viscosity" else "log10 Π/σ0")
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
@@ -401,7 +474,7 @@ def main(argv=None) -> None:
     (out / "figures").mkdir(parents=True, exist_ok=True)
     points = collect([data])
     (out / "dataset.md").write_text(card_markdown(records, points, args.command, args.min_strain))
-    plot_fig2(records, out / "figures" / "dataset_fig2.png")
+    plot_fig2(records, points, out / "figures" / "dataset_fig2.png")
     plot_fig3(records, out / "figures" / "dataset_fig3.png")
     print(f"{len(records)} runs -> {out / 'dataset.md'}, {data / 'index.json'}")
 
