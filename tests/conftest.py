@@ -60,3 +60,31 @@ def tiny_training_overrides(tiny_files, tmp_path) -> list[str]:
         "data.num_folds=3",
         "graph.min_strain=0.05",
     ]
+
+
+def sheared_frictional_problem(n_particles: int = 100, size_ratio: float = 1.4, steps: int = 300):
+    """A dense frictional state (phi = 0.78, sigma/sigma0 = 20, implicit springs, 300 steps: contacts
+    sticking and sliding, lubricated gaps) and its linear problem at that state, without changing it:
+    (simulation, LinearProblem, dense resistance matrix (3N, 3N))."""
+    from rheograph.sim import SimParams, Simulation
+    from rheograph.sim.assembly import dense_from_upper_csc
+    from rheograph.sim.integrator import linear_problem
+
+    params = SimParams(
+        n_particles=n_particles,
+        phi=0.78,
+        stress=20.0,
+        size_ratio=size_ratio,
+        integrator="implicit",
+        disp_max=2e-3,
+    )
+    sim = Simulation(params)
+    for _ in range(steps):
+        sim.step()
+    s, p = sim.state, params
+    lp = linear_problem(
+        s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, s.stretch.copy(),
+        s.contact_state.copy(), p.kn, p.kt, p.mu, p.critical_load, p.lub_max_gap, p.delta, s.dt_assumed,
+        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
+    )  # fmt: skip
+    return sim, lp, dense_from_upper_csc(lp.data, sim.indices, sim.indptr, 3 * n_particles)

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import sheared_frictional_problem
 
 from rheograph.sim import contacts
 from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK
@@ -11,6 +12,17 @@ RADII = np.array([1.0, 1.4])
 PI, PJ = np.array([0]), np.array([1])
 ABAR = 1.2
 NVEC = np.array([[1.0, 0.0]])
+
+
+def nearest_image_vector(state, i, j):
+    """Vector from particle i to the nearest of the 3 x 3 Lees-Edwards images of j, found by search
+    (independent of the simulator's minimum-image convention)."""
+    images = [
+        state.positions[j] + kx * np.array([state.lx, 0.0]) + ky * np.array([state.le_offset, state.ly])
+        for kx in (-1, 0, 1)
+        for ky in (-1, 0, 1)
+    ]
+    return min((x - state.positions[i] for x in images), key=np.linalg.norm)
 
 
 def clm(overlap, stretch_t, stretch_n=0.0):
@@ -144,12 +156,7 @@ def test_contact_spring_stress_is_the_virial_over_touching_pairs_found_by_brute_
     assert touching.size > 10
     for p in touching:
         i, j = s.pair_i[p], s.pair_j[p]
-        images = [
-            s.positions[j] + kx * np.array([s.lx, 0.0]) + ky * np.array([s.le_offset, s.ly])
-            for kx in (-1, 0, 1)
-            for ky in (-1, 0, 1)
-        ]
-        rvec = min((x - s.positions[i] for x in images), key=np.linalg.norm)
+        rvec = nearest_image_vector(s, i, j)
         dist = np.linalg.norm(rvec)
         n = rvec / dist
         abar = 0.5 * (s.radii[i] + s.radii[j])
@@ -168,23 +175,11 @@ def test_contact_dashpot_stress_is_the_virial_of_the_dashpot_forces_found_by_bru
     nearest Lees-Edwards image, the dashpot force on i F_i = -[R_contact (U + U_affine)]_i with the
     affine flow y e_x and spin -1/2 at unit rate, and sym(r (x) F_i) -- the same virial convention as the
     springs.  The xx and yy components carry the dashpot's share of the particle pressure."""
-    from rheograph.sim.assembly import dense_from_upper_csc
-    from rheograph.sim.integrator import Simulation, linear_problem
     from rheograph.sim.lubrication import contact_block
-    from rheograph.sim.params import SimParams
     from rheograph.sim.stress import pair_stress_sums
 
-    params = SimParams(n_particles=64, phi=0.78, stress=20.0, integrator="implicit", disp_max=2e-3)
-    sim = Simulation(params)
-    for _ in range(300):
-        sim.step()
-    s, p = sim.state, params
-    lp = linear_problem(
-        s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, s.stretch.copy(),
-        s.contact_state.copy(), p.kn, p.kt, p.mu, p.critical_load, p.lub_max_gap, p.delta, s.dt_assumed,
-        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
-    )  # fmt: skip
-    matrix = dense_from_upper_csc(lp.data, sim.indices, sim.indptr, 3 * p.n_particles)
+    sim, lp, matrix = sheared_frictional_problem(64)
+    s = sim.state
     velocities = np.linalg.solve(matrix, lp.rhs.T)  # (3N, 2): springs, unit rate
     _, dash_const, _, dash_rate = pair_stress_sums(
         velocities[:, 0], velocities[:, 1], s.radii, s.pair_i, s.pair_j, lp.nvec, lp.r, lp.dy, lp.coeff,
@@ -197,12 +192,7 @@ def test_contact_dashpot_stress_is_the_virial_of_the_dashpot_forces_found_by_bru
         brute = np.zeros(3)
         for q in touching:
             i, j = s.pair_i[q], s.pair_j[q]
-            images = [
-                s.positions[j] + kx * np.array([s.lx, 0.0]) + ky * np.array([s.le_offset, s.ly])
-                for kx in (-1, 0, 1)
-                for ky in (-1, 0, 1)
-            ]
-            rvec = min((x - s.positions[i] for x in images), key=np.linalg.norm)
+            rvec = nearest_image_vector(s, i, j)
             n = rvec / np.linalg.norm(rvec)
             u = np.r_[velocities[3 * i : 3 * i + 3, part], velocities[3 * j : 3 * j + 3, part]]
             if part == 1:  # relative affine flow: j moves by y_j - y_i along x, both spin at -1/2

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import sheared_frictional_problem
 
 from rheograph.sim import SimParams, Simulation
 from rheograph.sim.assembly import assemble_resistance, dense_from_upper_csc
@@ -198,23 +199,11 @@ def _frictional_linear_problem(size_ratio):
     """A dense frictional state (implicit springs, contacts of every kind) and its linear problem, with the
     simulator's shear stress per unit rate as a function of the non-affine velocities, and the contacts'
     rotation defect (see the reciprocity test)."""
-    from rheograph.sim.integrator import linear_problem
     from rheograph.sim.lubrication import contact_block
 
-    params = SimParams(
-        n_particles=100, phi=0.78, stress=20.0, size_ratio=size_ratio, integrator="implicit", disp_max=2e-3
-    )
-    sim = Simulation(params)
-    for _ in range(300):
-        sim.step()
-    s, p = sim.state, params
-    lp = linear_problem(
-        s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, s.stretch.copy(),
-        s.contact_state.copy(), p.kn, p.kt, p.mu, p.critical_load, p.lub_max_gap, p.delta, s.dt_assumed,
-        sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
-    )  # fmt: skip
+    sim, lp, matrix = sheared_frictional_problem(100, size_ratio)
+    s, p = sim.state, sim.params
     assert lp.n_contacts > 10 and lp.lubricated.any() and (lp.k_tangential > 0).any()
-    matrix = dense_from_upper_csc(lp.data, sim.indices, sim.indptr, 3 * p.n_particles)
 
     def shear_stress_per_unit_rate(velocity):
         """Lubrication + dashpot pair sum of S_xy for non-affine velocities ``velocity`` (3N) plus the
