@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import publish  # noqa: E402
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
-from rheograph.learn.train import config_fingerprint  # noqa: E402
+from rheograph.learn.train import run_stamps, stamps_differ  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (("r2_log_eta", "log η_r"), ("r2_log_pressure", "log Π"), ("r2_z_mu", "Z_μ"))
@@ -56,7 +56,7 @@ def main(argv=None) -> None:
         "--keep-earlier",
         action="store_true",
         help="report a (φ, N) whose 5 folds an earlier version of this command finished, even if the "
-        "configuration changed since (marked †), instead of retraining it",
+        "configuration or data changed since (marked †), instead of retraining it",
     )
     ap.add_argument(
         "--report-only",
@@ -83,9 +83,7 @@ def main(argv=None) -> None:
         if args.report_only and not finished:
             print(f"{split}, N = {n}, φ = {phi}: not trained yet (--report-only): skipped")
             continue
-        stale = finished and (run_dir / "config_fingerprint.txt").read_text().strip() != (
-            config_fingerprint(cfg)
-        )
+        stale = finished and bool(stamps_differ(run_dir, run_stamps(cfg)))  # other configuration or data
         if not (stale and (args.keep_earlier or args.report_only)):
             t0 = time.perf_counter()
             train_or_resume(cfg, run_dir)
@@ -181,10 +179,10 @@ def write(results: dict, args) -> None:
     if any(stale for _, _, stale in results.values()):
         lines += [
             "",
-            "† trained by an earlier configuration of this command (same data and epochs; the "
-            "default model or the fold assignment has changed since — the row's report in "
-            "docs/results/surrogate_per_phi/ names its inputs), kept with `--keep-earlier` or "
-            "`--report-only`; rerun without them to retrain.",
+            "† trained by an earlier configuration of this command or on an earlier version of its "
+            "data (the default model, the fold assignment or the trajectory files have changed since — "
+            "the row's report in docs/results/surrogate_per_phi/ names its inputs), kept with "
+            "`--keep-earlier` or `--report-only`; rerun without them to retrain.",
         ]
     lines += [
         "",

@@ -76,14 +76,13 @@ COLUMNS = [
 
 def train_or_resume(cfg, run_dir: Path) -> None:
     """Train the folds into ``run_dir``, keeping folds an interrupted earlier invocation of the same
-    configuration finished; a directory of another configuration is replaced."""
-    from rheograph.errors import InputError
+    configuration finished on the same data; a directory of another configuration or other data is
+    replaced."""
+    from rheograph.errors import OtherRunError
 
     try:
         train_folds(cfg, run_dir)
-    except InputError as exc:
-        if "another configuration" not in str(exc):
-            raise
+    except OtherRunError:
         shutil.rmtree(run_dir)
         train_folds(cfg, run_dir)
 

@@ -442,6 +442,34 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
         train_folds(compose_train([*base, "model.hidden=16"]), run_dir)
 
 
+def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
+    """Folds trained on some trajectory files are never mixed with folds of changed files: after a run was
+    extended, resuming into the directory is refused by name; the same files copied elsewhere (a clone)
+    are the same data."""
+    import shutil
+
+    from rheograph.errors import OtherRunError
+    from rheograph.io.hdf5 import data_fingerprint, read_params
+    from rheograph.learn.train import train_folds
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    copies = tmp_path / "data"
+    copies.mkdir()
+    for f in tiny_files:
+        shutil.copy(f, copies / Path(f).name)
+    assert data_fingerprint(sorted(copies.glob("*.h5"))) == data_fingerprint(tiny_files)
+    base = [*quick_folds([str(copies / "s5.h5")], tmp_path), "fold=1", "report=false"]
+    run_dir = tmp_path / "run"
+    train_folds(compose_train(base), run_dir)
+    train_folds(compose_train(base), run_dir)  # same data: resumes
+    extended = SimParams.from_mapping({**read_params(copies / "s5.h5"), "strain": 0.35})
+    run_state_point(extended, copies / "s5.h5", progress=False)
+    assert data_fingerprint(sorted(copies.glob("*.h5"))) != data_fingerprint(tiny_files)
+    with pytest.raises(OtherRunError, match="other data"):
+        train_folds(compose_train(base), run_dir)
+
+
 def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path):
     """fold_workers=2 trains folds in two processes; with one thread each and the same per-fold seeds, the
     test predictions equal those of one process training the folds in turn."""

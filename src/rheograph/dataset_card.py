@@ -454,7 +454,8 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--command",
         default=(
-            "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.70-0.78\n"
+            "python simulate.py -m experiment=dataset_paper_n400_phi070_074      # N = 400, phi 0.70-0.74\n"
+            "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.76, 0.78\n"
             "python simulate.py -m experiment=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)\n"
             "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.70,0.76   # N = 2000, two seeds\n"
             "python simulate.py -m experiment=dataset_paper_phi080 sim.n_particles=2000 sim.seed=1,2"

@@ -1,6 +1,6 @@
-"""The one error type for bad user input: a parameter out of range, a file that is not what it should be,
-a glob that matches nothing.  Its message names the key, value or file and what to do; entry points
-print it as one line and exit non-zero (``one_line_errors``)."""
+"""The one error type for bad user input (and its one special case, ``OtherRunError``): a parameter out
+of range, a file that is not what it should be, a glob that matches nothing.  Its message names the key,
+value or file and what to do; entry points print it as one line and exit non-zero (``one_line_errors``)."""
 
 import os
 import sys
@@ -9,6 +9,11 @@ from contextlib import contextmanager
 
 class InputError(ValueError):
     """Bad input from the user (configuration, command line or file)."""
+
+
+class OtherRunError(InputError):
+    """A training run directory that holds folds of another configuration or of other data: resuming
+    into it would mix them."""
 
 
 @contextmanager

@@ -300,6 +300,19 @@ def read_params(path: str | Path) -> dict:
         return json.loads(h5.attrs["params"])
 
 
+def data_fingerprint(paths) -> str:
+    """Hash of what trajectory files hold — parameters, status, strain and steps reached — not of where
+    they lie or when they were copied: equal for a clone of the same data; different once a file is added
+    or removed, a run extended, or a state point resimulated with other parameters."""
+    import hashlib
+
+    identities = sorted(
+        json.dumps([info["params"], info["status"], info["strain"], info["steps"]], sort_keys=True)
+        for info in (read_run_info(p) for p in paths)
+    )
+    return hashlib.sha1("\n".join(identities).encode()).hexdigest()[:16]
+
+
 def read_run_info(path: str | Path) -> dict:
     """Status, parameters, summary and progress (strain and steps at the checkpoint) of a trajectory
     file, read only."""

@@ -120,17 +120,22 @@ class SnapshotDataModule(L.LightningDataModule):
         self.train_fraction = train_fraction
         self.dataset = None
 
-    def setup(self, stage=None):
-        if self.dataset is not None:
-            return
-        # a model per area fraction (and system size) out of a pooled file list: other files are never read
+    def selected_files(self) -> list[str]:
+        """The trajectory files of ``data.files`` at ``data.phi`` and ``data.n_particles`` (either null: all):
+        a model per area fraction (and system size) out of a pooled file list; other files are never read."""
+        files = self.files
         for key, wanted in (("phi", self.phi), ("n_particles", self.n_particles)):
             if wanted is None:
                 continue
-            files = [f for f in self.files if np.isclose(trajectory_param(f, key), wanted)]
+            files = [f for f in files if np.isclose(trajectory_param(f, key), wanted)]
             if not files:
                 raise InputError(f"data.{key}={wanted}: no trajectory with this value in data.files")
-            self.files = files
+        return files
+
+    def setup(self, stage=None):
+        if self.dataset is not None:
+            return
+        self.files = self.selected_files()
         dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir)
         index = np.arange(len(dataset))
         self.dataset = dataset

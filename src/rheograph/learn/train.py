@@ -13,8 +13,9 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from rheograph.errors import InputError
+from rheograph.errors import InputError, OtherRunError
 from rheograph.graphs.dataset import GraphSettings
+from rheograph.io.hdf5 import data_fingerprint
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
@@ -306,17 +307,45 @@ def config_fingerprint(cfg: DictConfig) -> str:
     return hashlib.sha1(json.dumps(keep, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def run_stamps(cfg: DictConfig) -> dict[str, str]:
+    """What a run directory of this configuration holds, by stamp file: the configuration's fingerprint and
+    that of the trajectory files it selects (``data_fingerprint``: added, extended or resimulated files
+    change it)."""
+    files = instantiate(cfg.data, graph=graph_settings(cfg), _convert_="all").selected_files()
+    return {
+        "config_fingerprint.txt": config_fingerprint(cfg),
+        "data_fingerprint.txt": data_fingerprint(files),
+    }
+
+
+def stamps_differ(run_dir: Path, stamps: dict[str, str]) -> list[str]:
+    """The stamp files of ``run_dir`` that hold something else than ``stamps`` (a missing one does not:
+    directories written before the data stamp existed get it when resumed)."""
+    return [
+        name
+        for name, value in stamps.items()
+        if (run_dir / name).exists() and (run_dir / name).read_text().strip() != value
+    ]
+
+
 def check_resumable(cfg: DictConfig, run_dir: Path) -> None:
-    """A run directory holds folds of one configuration: rerunning the same command into it (e.g.
-    ``hydra.run.dir=<that run>``) resumes; another configuration is refused."""
-    stamp = run_dir / "config_fingerprint.txt"
-    mine = config_fingerprint(cfg)
-    if stamp.exists() and stamp.read_text().strip() != mine:
-        raise InputError(
+    """A run directory holds folds of one configuration trained on one set of data: rerunning the same
+    command into it (e.g. ``hydra.run.dir=<that run>``) resumes; another configuration, or trajectory
+    files that changed since, are refused."""
+    stamps = run_stamps(cfg)
+    differ = stamps_differ(run_dir, stamps)
+    if "config_fingerprint.txt" in differ:
+        raise OtherRunError(
             f"{run_dir} holds folds trained with another configuration: resume with the same overrides, "
             "or train into a new directory"
         )
-    stamp.write_text(mine + "\n")
+    if differ:
+        raise OtherRunError(
+            f"{run_dir} holds folds trained on other data (trajectory files added, removed, extended or "
+            "resimulated since): train into a new directory"
+        )
+    for name, value in stamps.items():
+        (run_dir / name).write_text(value + "\n")
 
 
 def save_finished_fold(run_dir: Path, k: int, result: dict, prediction: dict) -> None:
