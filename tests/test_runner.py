@@ -180,6 +180,44 @@ def test_an_interrupted_run_compacted_for_committing_resumes_to_the_uninterrupte
         np.testing.assert_array_equal(h1["snapshots/positions"][()], h2["snapshots/positions"][()])
 
 
+def test_a_run_respaced_and_extended_equals_a_run_at_the_coarser_spacing_from_the_start(tmp_path):
+    """``python -m rheograph.respace``: a finished run with snapshots every 0.03, thinned to every 0.06 and
+    extended at 0.06, holds the snapshots (strains, positions, targets, contact lists), time series and
+    checkpoint of a run made at 0.06 from the start; a spacing that is not a whole multiple of the file's,
+    and a jammed run, are refused by name, leaving the file as it was."""
+    from rheograph.errors import InputError
+    from rheograph.io.hdf5 import respace_snapshots
+    from rheograph.respace import main as respace_main
+
+    coarse = SimParams(**{**TINY, "snapshot_interval": 0.06, "strain": 0.2})
+    ref, fine = tmp_path / "ref.h5", tmp_path / "fine.h5"
+    run_state_point(coarse, ref, progress=False)
+    run_state_point(SimParams(**TINY), fine, progress=False)  # every 0.03 to strain 0.12
+    untouched = fine.read_bytes()
+    for bad in ("0.045", "0.015", "0"):
+        with pytest.raises(InputError, match=f"interval={float(bad)!r}.*whole multiple"):
+            respace_main([str(fine), "--interval", bad])
+    assert fine.read_bytes() == untouched
+    respace_main([str(fine), "--interval", "0.06"])
+    with h5py.File(fine) as h5:
+        assert h5["snapshots/strain"].shape[0] == 2 and is_compact(
+            h5
+        )  # strains 0 and 0.06 of 0, .03, .06, .09
+    assert run_state_point(coarse, fine, progress=False).status == "completed"
+    with h5py.File(ref) as a, h5py.File(fine) as b:
+        assert json.loads(a.attrs["params"]) == json.loads(b.attrs["params"])
+        assert a["snapshots/strain"].shape[0] == 4
+        for group in ("snapshots", "timeseries", "checkpoint"):
+            for name in a[group]:
+                np.testing.assert_array_equal(a[group][name][()], b[group][name][()], err_msg=name)
+    jammed = tmp_path / "jammed.h5"
+    run_state_point(SimParams(**TINY), jammed, progress=False)
+    with h5py.File(jammed, "r+") as h5:
+        h5.attrs["status"] = "jammed"
+    with pytest.raises(InputError, match="jammed"):
+        respace_snapshots(jammed, 0.06)
+
+
 def test_the_compact_layout_keeps_what_the_learning_and_a_resume_need(tmp_path):
     """At rest, positions are stored to 1e-7 a, stretches as float32 and pairs as int32
     (rheograph.io.hdf5.AT_REST): against the raw file of the same run, positions move by <= 5e-8 a, the

@@ -333,18 +333,30 @@ def is_compact(h5: h5py.File) -> bool:
     return h5["snapshots/positions"].scaleoffset is not None
 
 
-def rewrite(path: str | Path, compressed: bool = True) -> tuple[int, int]:
+def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None) -> tuple[int, int]:
     """Rewrite a trajectory file not being written: compact at rest (``compressed=True``: COMPRESSION on
     every chunked dataset, AT_REST storage for positions, stretches and pairs) or raw with the writer's
     dtypes (``compressed=False``, before a finished run is extended).  Attributes, chunking and the exact
-    checkpoint are kept.  Written to a temporary file and swapped in atomically.  Returns (bytes before,
-    bytes after)."""
+    checkpoint are kept; ``keep_snapshots`` (indices, ascending) keeps only those snapshots, with their
+    contact lists.  Written to a temporary file and swapped in atomically.  Returns (bytes before, bytes
+    after)."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
     with h5py.File(path, "r") as src, h5py.File(tmp, "w") as dst:
         if src.attrs.get("producer") != PRODUCER:
             raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
         dst.attrs.update(dict(src.attrs))
+        selected = {}
+        if keep_snapshots is not None:
+            keep = np.asarray(keep_snapshots, dtype=np.int64)
+            offset = src["snapshots/contact_offset"][()]
+            rows = np.concatenate([np.arange(offset[k], offset[k + 1]) for k in keep] or [np.zeros(0, int)])
+            selected = {f"snapshots/{name}": keep for name in (*SNAPSHOT_SCALARS, "positions")}
+            selected.update(
+                {f"snapshots/{n}": rows for n in ("contact_pairs", "contact_state", "contact_stretch")}
+            )
+            counts = offset[keep + 1] - offset[keep]
+            new_offset = np.concatenate([[0], np.cumsum(counts)]).astype(offset.dtype)
 
         def copy(name, obj):
             if isinstance(obj, h5py.Group):
@@ -355,10 +367,58 @@ def rewrite(path: str | Path, compressed: bool = True) -> tuple[int, int]:
                 options["dtype"] = WRITER_DTYPES[name]
             if obj.chunks and compressed:
                 options.update(COMPRESSION, **AT_REST.get(name, {}))
-            out = dst.create_dataset(name, data=obj[()], maxshape=obj.maxshape, chunks=obj.chunks, **options)
+            if name == "snapshots/contact_offset" and keep_snapshots is not None:
+                data = new_offset
+            else:
+                data = obj[()][selected[name]] if name in selected else obj[()]
+            out = dst.create_dataset(name, data=data, maxshape=obj.maxshape, chunks=obj.chunks, **options)
             out.attrs.update(dict(obj.attrs))
 
         src.visititems(copy)
     before, after = path.stat().st_size, tmp.stat().st_size
     tmp.replace(path)
     return before, after
+
+
+def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
+    """Thin the snapshots of a run that no simulation is writing to every ``interval`` of strain, so that
+    it can be extended at that spacing (``sim.snapshot_interval=interval``, a larger ``sim.strain``) as
+    if it had been run at it from the start: ``interval`` must be a whole multiple of the file's
+    ``snapshot_interval``; kept is the first snapshot in each ``interval`` of strain — the one a run at
+    that spacing takes, since the finer grid passes through every multiple of ``interval``.  The file's
+    parameters and checkpoint (snapshot count, next snapshot strain) are updated; the dynamics, time
+    series and checkpoint state are untouched.  Snapshots written after the checkpoint are dropped (a
+    resume would drop them too).  Returns (snapshots before, kept)."""
+    path = Path(path)
+    with h5py.File(path, "r") as h5:
+        if h5.attrs.get("producer") != PRODUCER:
+            raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
+        status = str(h5.attrs["status"])
+        params = json.loads(h5.attrs["params"])
+        counters = json.loads(h5["checkpoint"].attrs["counters"])
+        strain = h5["snapshots/strain"][: counters["snapshots"]]
+        compact = is_compact(h5)
+    current = float(params["snapshot_interval"])
+    ratio = interval / current if interval > 0 else 0.0
+    if not (np.isfinite(ratio) and ratio >= 1.0 and abs(ratio - round(ratio)) < 1e-9):
+        raise InputError(
+            f"interval={interval!r} is invalid for {path}: allowed a whole multiple (>= 1) of its "
+            f"snapshot_interval {current:g}"
+        )
+    if status in ("running", "jammed"):
+        raise InputError(
+            f"{path} is {status}: respacing is for finished or interrupted flowing runs that will be "
+            "extended (a jammed run's arrest snapshot lies off any grid)"
+        )
+    cell = np.floor(strain / interval + 1e-9)
+    keep = np.flatnonzero(np.concatenate([[True], cell[1:] > cell[:-1]])) if strain.size else strain
+    rewrite(path, compressed=compact, keep_snapshots=keep)
+    with h5py.File(path, "r+") as h5:
+        params["snapshot_interval"] = float(interval)
+        h5.attrs["params"] = json.dumps(params)
+        h5.attrs["param_snapshot_interval"] = float(interval)
+        counters["snapshots"] = int(len(keep))
+        if len(keep):
+            counters["next_snapshot"] = (np.floor(strain[keep[-1]] / interval + 1e-9) + 1) * interval
+        h5["checkpoint"].attrs["counters"] = json.dumps(counters)
+    return int(strain.size), int(len(keep))
