@@ -393,6 +393,8 @@ def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
     with h5py.File(path, "r") as h5:
         if h5.attrs.get("producer") != PRODUCER:
             raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
+        if "checkpoint" not in h5:
+            raise TrajectoryFileError(f"{path}: no checkpoint (resume the run once, then respace it)")
         status = str(h5.attrs["status"])
         params = json.loads(h5.attrs["params"])
         counters = json.loads(h5["checkpoint"].attrs["counters"])
