@@ -31,7 +31,6 @@ from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS_PLANNED = {400: 3, 2000: 2}  # issue #13's grid
-STRAIN_PLANNED = 3.0  # per run: the dataset's experiment configs
 
 
 def run_row(path: Path, params: dict, status: str, strain: float) -> dict:
@@ -46,6 +45,7 @@ def run_row(path: Path, params: dict, status: str, strain: float) -> dict:
         disp=params["disp_max"],
         status=status,
         strain=strain,
+        planned_strain=params["strain"],  # the experiment's sim.strain
         cpu=cpu,
         cost=cpu / strain if strain > 0 else float("nan"),
     )
@@ -76,10 +76,11 @@ def extra_rows(pattern: str) -> list[dict]:
 
 def render(rows: list[dict], extra: list[dict], command: str) -> str:
     by_point = defaultdict(list)
-    recorded = defaultdict(float)
+    recorded, planned_strain = defaultdict(float), defaultdict(float)
     for r in rows:
         by_point[(r["n"], r["phi"], r["stress"])].append(r["cost"])
         recorded[(r["n"], r["phi"])] += r["cpu"]
+        planned_strain[(r["n"], r["phi"])] = max(planned_strain[(r["n"], r["phi"])], r["planned_strain"])
     sizes = sorted({(n, phi) for n, phi, _ in by_point})
     stresses = sorted({s for _, _, s in by_point})
     # the grid planned at an area fraction: every stress the dataset has there at any N
@@ -88,25 +89,28 @@ def render(rows: list[dict], extra: list[dict], command: str) -> str:
         "CPU seconds per unit strain (median over seeds) of the committed dataset runs (implicit, disp_max "
         "2e-3; 1e-3 at φ = 0.80), per σ/σ0 (–: not simulated at that (N, φ)).  *Recorded*: the CPU hours "
         "the runs at that (N, φ) spent (unfinished ones so far).  *Grid, extrapolated*: the medians × the "
-        f"planned seeds (N = 400: {SEEDS_PLANNED[400]}, N = 2000: {SEEDS_PLANNED[2000]}) × "
-        f"{STRAIN_PLANNED:g} strain, summed over the stresses the dataset has at that φ — an upper "
-        "estimate where runs shear-jam (they stop early), a lower bound (≥) where a planned stress has no "
-        "run yet.",
+        f"planned seeds (N = 400: {SEEDS_PLANNED[400]}, N = 2000: {SEEDS_PLANNED[2000]}) × the strain "
+        "per run (the experiment's `sim.strain`), summed over the stresses the dataset has at that φ — "
+        "an upper estimate where runs shear-jam (they stop early), a lower bound (≥) where a planned stress "
+        "has no run yet.",
         "",
         "| N | φ | "
         + " | ".join(f"{s:g}" for s in stresses)
-        + " | recorded CPU h | grid CPU h, extrapolated |",
-        "|---|---|" + "---|" * len(stresses) + "---|---|",
+        + " | strain per run | recorded CPU h | grid CPU h, extrapolated |",
+        "|---|---|" + "---|" * len(stresses) + "---|---|---|",
     ]
     for n, phi in sizes:
         medians = {
             s: np.nanmedian(by_point[(n, phi, s)]) if (n, phi, s) in by_point else np.nan for s in stresses
         }
         grid = sum(medians[s] for s in planned[phi] if np.isfinite(medians[s]))
-        grid *= SEEDS_PLANNED.get(n, 1) * STRAIN_PLANNED / 3600
+        grid *= SEEDS_PLANNED.get(n, 1) * planned_strain[(n, phi)] / 3600
         partial = "≥ " if any(np.isnan(medians[s]) for s in planned[phi]) else ""
         cells = " | ".join("–" if np.isnan(medians[s]) else f"{medians[s]:.0f}" for s in stresses)
-        lines.append(f"| {n} | {phi:.2f} | {cells} | {recorded[(n, phi)] / 3600:.2f} | {partial}{grid:.2f} |")
+        lines.append(
+            f"| {n} | {phi:.2f} | {cells} | {planned_strain[(n, phi)]:g} | {recorded[(n, phi)] / 3600:.2f} | "
+            f"{partial}{grid:.2f} |"
+        )
     if extra:
         lines += [
             "",
