@@ -7,7 +7,13 @@ import h5py
 import numpy as np
 import pytest
 
-from rheograph.io.hdf5 import TrajectoryFileError, is_compact, read_run_info, read_timeseries
+from rheograph.io.hdf5 import (
+    TrajectoryFileError,
+    is_compact,
+    read_run_info,
+    read_timeseries,
+    respace_snapshots,
+)
 from rheograph.runner import run_state_point
 from rheograph.sim.params import ParameterError, SimParams
 
@@ -186,7 +192,6 @@ def test_a_run_respaced_and_extended_equals_a_run_at_the_coarser_spacing_from_th
     checkpoint of a run made at 0.06 from the start; a spacing that is not a whole multiple of the file's,
     and a jammed run, are refused by name, leaving the file as it was."""
     from rheograph.errors import InputError
-    from rheograph.io.hdf5 import respace_snapshots
     from rheograph.respace import main as respace_main
 
     coarse = SimParams(**{**TINY, "snapshot_interval": 0.06, "strain": 0.2})
@@ -281,6 +286,8 @@ def test_a_state_point_already_running_elsewhere_is_refused(tmp_path):
         assert holder.stdout.readline().strip() == "open"
         with pytest.raises(TrajectoryFileError, match="open in another process"):
             run_state_point(SimParams(**{**TINY, "strain": 0.2}), path, progress=False)
+        with pytest.raises(TrajectoryFileError, match="is a simulation writing it"):
+            respace_snapshots(path, 0.06)
     finally:
         holder.kill()
 

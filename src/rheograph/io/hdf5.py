@@ -390,7 +390,11 @@ def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
     series and checkpoint state are untouched.  Snapshots written after the checkpoint are dropped (a
     resume would drop them too).  Returns (snapshots before, kept)."""
     path = Path(path)
-    with h5py.File(path, "r") as h5:
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as exc:  # being written (HDF5 file lock), or not HDF5 at all
+        raise TrajectoryFileError(f"{path}: cannot be respaced ({exc}); is a simulation writing it?") from exc
+    with h5:
         if h5.attrs.get("producer") != PRODUCER:
             raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
         if "checkpoint" not in h5:
