@@ -87,6 +87,30 @@ def test_each_complete_area_fraction_has_the_papers_snapshot_count(index):
     assert json.loads(INDEX.read_text())["format"] == "rheograph-index-1"
 
 
+def test_snapshots_are_spaced_by_at_least_the_decorrelation_strain(index):
+    """Issue #13 item 4: per (N, phi), the snapshot spacing is at least the median (over flowing runs) 1/e
+    decorrelation strain of each instantaneous target, measured over the steady window as the card does."""
+    from rheograph.analysis import decorrelation_strain
+
+    taus, spacing = defaultdict(list), defaultdict(set)
+    for entry in index["runs"]:
+        p = entry["params"]
+        key = (p["n_particles"], round(p["phi"], 2))
+        spacing[key].add(p["snapshot_interval"])
+        if entry["status"] != "completed":
+            continue
+        with h5py.File(entry["path"], "r") as h5:
+            ts = h5["timeseries"]
+            steady = ts["strain"][()] >= p["steady_state_strain"]
+            series = (np.log(np.abs(ts["viscosity"][()]) + 1e-12), ts["pressure"][()], ts["z_mu"][()])
+            taus[key].append([decorrelation_strain(x[steady], p["output_interval"]) for x in series])
+    assert len(taus) >= 9
+    for key, values in taus.items():
+        assert len(spacing[key]) == 1, (key, spacing[key])  # one spacing per (N, phi)
+        tau = np.nanmedian(np.array(values), axis=0).max()
+        assert spacing[key].pop() >= tau, (key, tau)
+
+
 def test_jamming_onset_per_seed_names_what_is_still_open():
     """The card's onset per seed: the smallest jammed stress, or 'none up to' the largest completed one
     of *that seed*; an unfinished run below the onset is named instead of being read as flowing."""

@@ -306,11 +306,20 @@ def data_fingerprint(paths) -> str:
     or removed, a run extended, or a state point resimulated with other parameters."""
     import hashlib
 
-    identities = sorted(
-        json.dumps([info["params"], info["status"], info["strain"], info["steps"]], sort_keys=True)
-        for info in (read_run_info(p) for p in paths)
-    )
-    return hashlib.sha1("\n".join(identities).encode()).hexdigest()[:16]
+    identities = []
+    for path in paths:
+        try:
+            info = read_run_info(path)
+        except (OSError, KeyError) as exc:
+            raise TrajectoryFileError(
+                f"{path}: cannot be read ({exc}); if a simulation is still writing it, wait or train on a "
+                "sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun that "
+                "state point"
+            ) from exc
+        identities.append(
+            json.dumps([info[k] for k in ("params", "status", "strain", "steps")], sort_keys=True)
+        )
+    return hashlib.sha1("\n".join(sorted(identities)).encode()).hexdigest()[:16]
 
 
 def read_run_info(path: str | Path) -> dict:
