@@ -342,12 +342,13 @@ def is_compact(h5: h5py.File) -> bool:
     return h5["snapshots/positions"].scaleoffset is not None
 
 
-def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None) -> tuple[int, int]:
+def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None, edit=None) -> tuple[int, int]:
     """Rewrite a trajectory file not being written: compact at rest (``compressed=True``: COMPRESSION on
     every chunked dataset, AT_REST storage for positions, stretches and pairs) or raw with the writer's
     dtypes (``compressed=False``, before a finished run is extended).  Attributes, chunking and the exact
     checkpoint are kept; ``keep_snapshots`` (indices, ascending) keeps only those snapshots, with their
-    contact lists.  Written to a temporary file and swapped in atomically.  Returns (bytes before, bytes
+    contact lists; ``edit(h5)`` changes the new file before the swap.  Written to a temporary file and
+    swapped in atomically.  Returns (bytes before, bytes
     after)."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
@@ -384,6 +385,8 @@ def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None) -> t
             out.attrs.update(dict(obj.attrs))
 
         src.visititems(copy)
+        if edit is not None:
+            edit(dst)
     before, after = path.stat().st_size, tmp.stat().st_size
     tmp.replace(path)
     return before, after
@@ -427,8 +430,8 @@ def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
         )
     cell = np.floor(strain / interval + 1e-9)
     keep = np.flatnonzero(np.concatenate([[True], cell[1:] > cell[:-1]])) if strain.size else strain
-    rewrite(path, compressed=compact, keep_snapshots=keep)
-    with h5py.File(path, "r+") as h5:
+
+    def new_spacing(h5):  # in the rewritten file, before it is swapped in: never half respaced
         params["snapshot_interval"] = float(interval)
         h5.attrs["params"] = json.dumps(params)
         h5.attrs["param_snapshot_interval"] = float(interval)
@@ -436,4 +439,6 @@ def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
         if len(keep):
             counters["next_snapshot"] = (np.floor(strain[keep[-1]] / interval + 1e-9) + 1) * interval
         h5["checkpoint"].attrs["counters"] = json.dumps(counters)
+
+    rewrite(path, compressed=compact, keep_snapshots=keep, edit=new_spacing)
     return int(strain.size), int(len(keep))
