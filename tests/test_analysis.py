@@ -147,3 +147,23 @@ def test_transient_strain_finds_the_end_of_a_relaxation():
     # 5 exp(-s/0.1) drops below the 2-sigma band of 0.1-strain block means (~0.03) near s ~ 0.5
     assert 0.3 <= t <= 0.7
     assert transient_strain(strain, 1.0 + 0.05 * rng.normal(size=strain.size), 1.0) <= 0.3
+
+
+def test_ensemble_transient_resolves_a_drift_below_one_runs_noise():
+    """A 10 % step that ends at strain 1.2, under per-row noise of 10 %: one run's 0.5-strain block means
+    scatter by 1.4 %, the average over 30 runs by 0.26 %, so the block [1, 1.5) (offset 4 %) is
+    resolved and [1.5, 2) (offset 0) is not; counting from strain 1 biases the mean by 0.1 x 0.2 / 3."""
+    from rheograph.analysis import ensemble_transient
+
+    rng = np.random.default_rng(3)
+    strain = np.arange(0.0, 4.0, 0.01)
+    drift = np.where(strain < 1.2, 0.1, 0.0)
+    runs = [(strain, drift + 0.1 * rng.normal(size=strain.size)) for _ in range(30)]
+    result = ensemble_transient(runs, reference_from=2.0, counted_from=1.0)
+    assert result["transient"] == 1.5
+    assert np.allclose(result["offset"][:2], 0.1, atol=4 * result["offset_se"][:2])
+    assert abs(result["bias"] - 0.1 * 0.2 / 3.0) < 4 * result["bias_se"]
+    # stationary runs: nothing resolved, no bias; runs too short for the reference window: NaN
+    flat = ensemble_transient([(strain, 0.1 * rng.normal(size=strain.size)) for _ in range(30)], 2.0, 1.0)
+    assert flat["transient"] == 0.0 and flat["bias"] == 0.0
+    assert np.isnan(ensemble_transient([(strain[:220], drift[:220])] * 3, 2.0, 1.0)["transient"])

@@ -157,6 +157,7 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
             n_flowing_snapshots=flowing, n_jammed_snapshots=0, cpu_seconds=3600.0, bytes=10**6,
             snapshot_interval=0.1, decorrelation=dict(viscosity=0.2, pressure=0.2, z_mu=0.2),
             transient=0.3, arrested=dict(pressure=np.array([]), z_mu=np.array([])),
+            log_viscosity_series=None if status == "jammed" else (np.array([0.0, 1.0]), np.zeros(2)),
         )  # fmt: skip
 
     records = [

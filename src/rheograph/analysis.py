@@ -123,3 +123,70 @@ def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals:
         return np.zeros(snapshot_strain.size, dtype=bool)
     onset = series_strain[max(series_strain.size - 1 - int(jam_intervals), 0)]
     return snapshot_strain >= onset
+
+
+def ensemble_transient(
+    runs: list[tuple[np.ndarray, np.ndarray]],
+    reference_from: float,
+    counted_from: float,
+    block: float = 0.5,
+) -> dict:
+    """Start-up transient of a set of runs at one state family, measured on their average.
+
+    One run's block means are too noisy to resolve a slow relaxation of a few per cent; averaged over the
+    runs of an (N, φ) they are not.  Per run, the means of ``values`` over ``block``-strain blocks below
+    ``reference_from`` minus the run's mean over strain >= ``reference_from``; averaged over the runs
+    (each run counted once), with the standard error over runs.
+
+    runs: (strain, values) per run, each (T,) with rows at a fixed strain interval (the time series).
+    Returns ``block_start`` (B,), ``offset`` and ``offset_se`` (B,) -- NaN where fewer than 2 runs
+    reach a block --, ``transient``: the end of the last block whose offset exceeds 2 standard
+    errors (0 when none does; ``reference_from`` is its ceiling), and ``bias``/``bias_se``: the mean
+    over runs of (mean over strain >= ``counted_from``) - (mean over strain >= ``transient``), i.e. what
+    counting a run from ``counted_from`` adds to its steady mean.  NaN entries when no run reaches
+    ``reference_from`` + ``block``."""
+    starts = np.arange(0.0, reference_from - 1e-9, block)
+    offsets, biases = [], []
+    for strain, values in runs:
+        strain, values = np.asarray(strain, dtype=np.float64), np.asarray(values, dtype=np.float64)
+        if strain.size == 0 or strain.max() < reference_from + block:
+            continue
+        reference = values[strain >= reference_from].mean()
+        offsets.append(
+            [
+                values[(strain >= s) & (strain < s + block)].mean() - reference
+                if np.any((strain >= s) & (strain < s + block))
+                else np.nan
+                for s in starts
+            ]
+        )
+        biases.append((strain, values))
+    nan = float("nan")
+    if not offsets:
+        return dict(
+            block_start=starts,
+            offset=starts * nan,
+            offset_se=starts * nan,
+            transient=nan,
+            bias=nan,
+            bias_se=nan,
+        )
+    table = np.array(offsets)
+    counts = np.isfinite(table).sum(axis=0)
+    offset = np.where(counts >= 2, np.nanmean(table, axis=0), nan) if table.size else table
+    with np.errstate(invalid="ignore", divide="ignore"):
+        offset_se = np.where(counts >= 2, np.nanstd(table, axis=0, ddof=1) / np.sqrt(counts), nan)
+    significant = np.flatnonzero(np.isfinite(offset) & (np.abs(offset) > 2.0 * offset_se))
+    transient = float(starts[significant[-1]] + block) if significant.size else 0.0
+    bias = np.array(
+        [v[s >= counted_from].mean() - v[s >= max(transient, counted_from)].mean() for s, v in biases]
+    )
+    bias_se = float(bias.std(ddof=1) / np.sqrt(bias.size)) if bias.size > 1 else nan
+    return dict(
+        block_start=starts,
+        offset=offset,
+        offset_se=offset_se,
+        transient=transient,
+        bias=float(bias.mean()),
+        bias_se=bias_se,
+    )
