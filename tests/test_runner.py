@@ -215,12 +215,50 @@ def test_a_run_respaced_and_extended_equals_a_run_at_the_coarser_spacing_from_th
         for group in ("snapshots", "timeseries", "checkpoint"):
             for name in a[group]:
                 np.testing.assert_array_equal(a[group][name][()], b[group][name][()], err_msg=name)
-    jammed = tmp_path / "jammed.h5"
+        counters = [json.loads(h5["checkpoint"].attrs["counters"]) for h5 in (a, b)]
+        for c in counters:
+            c.pop("cpu_seconds")  # measured, not simulated
+        assert counters[0] == counters[1]
+    # a batch is checked whole before any file is rewritten: a jammed run in it leaves the others alone
+    jammed, other = tmp_path / "jammed.h5", tmp_path / "other.h5"
     run_state_point(SimParams(**TINY), jammed, progress=False)
+    run_state_point(SimParams(**TINY), other, progress=False)
     with h5py.File(jammed, "r+") as h5:
         h5.attrs["status"] = "jammed"
+    untouched = other.read_bytes()
     with pytest.raises(InputError, match="jammed"):
-        respace_snapshots(jammed, 0.06)
+        respace_main([str(other), str(jammed), "--interval", "0.06"])
+    assert other.read_bytes() == untouched
+    with pytest.raises(InputError, match=r"files: \['.*nothing\*.h5'\] match no trajectory file"):
+        respace_main([str(other), str(tmp_path / "nothing*.h5"), "--interval", "0.06"])
+    assert other.read_bytes() == untouched
+
+
+def test_rewrite_refuses_bad_snapshot_selections_and_leaves_no_half_file(tmp_path):
+    """``rewrite(keep_snapshots=…)`` takes strictly ascending indices below the checkpoint's count and sets
+    that count to the kept one (a resume then continues after them); an edit that fails, like an
+    interruption, leaves the original file and no temporary file."""
+    from rheograph.errors import InputError
+    from rheograph.io.hdf5 import rewrite
+
+    path = tmp_path / "run.h5"
+    run_state_point(SimParams(**TINY), path, progress=False)  # 4 snapshots: strain 0, 0.03, 0.06, 0.09
+    untouched = path.read_bytes()
+    for bad in ([3, 1], [1, 1], [0, 4], [-1]):
+        with pytest.raises(InputError, match=r"keep_snapshots=.*strictly ascending indices in \[0, 4\)"):
+            rewrite(path, keep_snapshots=bad)
+    assert path.read_bytes() == untouched
+
+    def failing_edit(h5):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        rewrite(path, keep_snapshots=[0, 2], edit=failing_edit)
+    assert path.read_bytes() == untouched and not list(tmp_path.glob("*.tmp"))
+    rewrite(path, keep_snapshots=[0, 2])
+    with h5py.File(path) as h5:
+        assert json.loads(h5["checkpoint"].attrs["counters"])["snapshots"] == 2
+        assert h5["snapshots/strain"].shape == (2,) and 0.06 <= h5["snapshots/strain"][1] < 0.09
 
 
 def test_the_compact_layout_keeps_what_the_learning_and_a_resume_need(tmp_path):

@@ -24,9 +24,12 @@ def main(argv=None) -> None:
     ap.add_argument("files", nargs="+", help="trajectory files or glob patterns")
     ap.add_argument("--interval", type=float, required=True, help="new snapshot spacing in strain")
     args = ap.parse_args(argv)
+    unmatched = [pattern for pattern in args.files if not glob.glob(pattern)]
+    if unmatched:
+        raise InputError(f"files: {unmatched} match no trajectory file")
     files = sorted({f for pattern in args.files for f in glob.glob(pattern)})
-    if not files:
-        raise InputError(f"files={args.files} match no trajectory file")
+    for path in files:  # every file checked before any is rewritten: a batch is respaced whole or not at all
+        respace_snapshots(path, args.interval, dry_run=True)
     for path in files:
         before, kept = respace_snapshots(path, args.interval)
         print(f"{path}: kept {kept} of {before} snapshots (every {args.interval:g} strain)")

@@ -16,6 +16,7 @@ deterministic), so an interrupted run loses and duplicates nothing.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import h5py
@@ -346,20 +347,28 @@ def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None, edit
     """Rewrite a trajectory file not being written: compact at rest (``compressed=True``: COMPRESSION on
     every chunked dataset, AT_REST storage for positions, stretches and pairs) or raw with the writer's
     dtypes (``compressed=False``, before a finished run is extended).  Attributes, chunking and the exact
-    checkpoint are kept; ``keep_snapshots`` (indices, ascending) keeps only those snapshots, with their
-    contact lists; ``edit(h5)`` changes the new file before the swap.  Written to a temporary file and
-    swapped in atomically.  Returns (bytes before, bytes
-    after)."""
+    checkpoint are kept; ``keep_snapshots`` (indices, strictly ascending, below the checkpoint's snapshot
+    count) keeps only those snapshots, with their contact lists, and sets that count to theirs;
+    ``edit(h5)`` changes the new file before the swap.  Written to a temporary file, flushed to disk and
+    swapped in atomically; an interruption leaves the original file and no temporary one.  Returns
+    (bytes before, bytes after)."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    with h5py.File(path, "r") as src, h5py.File(tmp, "w") as dst:
+    with h5py.File(path, "r") as src:
         if src.attrs.get("producer") != PRODUCER:
             raise TrajectoryFileError(f"{path}: not a rheograph trajectory")
-        dst.attrs.update(dict(src.attrs))
         selected = {}
         if keep_snapshots is not None:
             keep = np.asarray(keep_snapshots, dtype=np.int64)
             offset = src["snapshots/contact_offset"][()]
+            n_written = offset.size - 1
+            if "checkpoint" in src:
+                n_written = min(n_written, json.loads(src["checkpoint"].attrs["counters"])["snapshots"])
+            if keep.size and (np.any(np.diff(keep) <= 0) or keep[0] < 0 or keep[-1] >= n_written):
+                raise InputError(
+                    f"keep_snapshots={keep.tolist()} is invalid for {path}: allowed strictly ascending "
+                    f"indices in [0, {n_written})"
+                )
             rows = np.concatenate([np.arange(offset[k], offset[k + 1]) for k in keep] or [np.zeros(0, int)])
             selected = {f"snapshots/{name}": keep for name in (*SNAPSHOT_SCALARS, "positions")}
             selected.update(
@@ -384,15 +393,27 @@ def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None, edit
             out = dst.create_dataset(name, data=data, maxshape=obj.maxshape, chunks=obj.chunks, **options)
             out.attrs.update(dict(obj.attrs))
 
-        src.visititems(copy)
-        if edit is not None:
-            edit(dst)
+        try:
+            with h5py.File(tmp, "w") as dst:
+                dst.attrs.update(dict(src.attrs))
+                src.visititems(copy)
+                if keep_snapshots is not None and "checkpoint" in dst:
+                    counters = json.loads(dst["checkpoint"].attrs["counters"])
+                    counters["snapshots"] = int(keep.size)
+                    dst["checkpoint"].attrs["counters"] = json.dumps(counters)
+                if edit is not None:
+                    edit(dst)
+            with open(tmp, "rb+") as handle:  # on disk before the swap: a crash keeps one whole file
+                os.fsync(handle.fileno())
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
     before, after = path.stat().st_size, tmp.stat().st_size
     tmp.replace(path)
     return before, after
 
 
-def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
+def respace_snapshots(path: str | Path, interval: float, dry_run: bool = False) -> tuple[int, int]:
     """Thin the snapshots of a run that no simulation is writing to every ``interval`` of strain, so that
     it can be extended at that spacing (``sim.snapshot_interval=interval``, a larger ``sim.strain``) as
     if it had been run at it from the start: ``interval`` must be a whole multiple of the file's
@@ -400,7 +421,8 @@ def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
     that spacing takes, since the finer grid passes through every multiple of ``interval``.  The file's
     parameters and checkpoint (snapshot count, next snapshot strain) are updated; the dynamics, time
     series and checkpoint state are untouched.  Snapshots written after the checkpoint are dropped (a
-    resume would drop them too).  Returns (snapshots before, kept)."""
+    resume would drop them too).  ``dry_run``: check and count only, change nothing.  Returns (snapshots
+    before, kept)."""
     path = Path(path)
     try:
         h5 = h5py.File(path, "r")
@@ -431,14 +453,17 @@ def respace_snapshots(path: str | Path, interval: float) -> tuple[int, int]:
     cell = np.floor(strain / interval + 1e-9)
     keep = np.flatnonzero(np.concatenate([[True], cell[1:] > cell[:-1]])) if strain.size else strain
 
+    if dry_run:
+        return int(strain.size), int(len(keep))
+
     def new_spacing(h5):  # in the rewritten file, before it is swapped in: never half respaced
         params["snapshot_interval"] = float(interval)
         h5.attrs["params"] = json.dumps(params)
         h5.attrs["param_snapshot_interval"] = float(interval)
-        counters["snapshots"] = int(len(keep))
+        new_counters = json.loads(h5["checkpoint"].attrs["counters"])  # snapshot count set by rewrite
         if len(keep):
-            counters["next_snapshot"] = (np.floor(strain[keep[-1]] / interval + 1e-9) + 1) * interval
-        h5["checkpoint"].attrs["counters"] = json.dumps(counters)
+            new_counters["next_snapshot"] = (np.floor(strain[keep[-1]] / interval + 1e-9) + 1) * interval
+        h5["checkpoint"].attrs["counters"] = json.dumps(new_counters)
 
     rewrite(path, compressed=compact, keep_snapshots=keep, edit=new_spacing)
     return int(strain.size), int(len(keep))
