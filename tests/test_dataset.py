@@ -2,6 +2,7 @@
 flowing snapshot has finite targets, jammed runs are labelled, seeds are independent, counts hold."""
 
 import json
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -157,7 +158,7 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
             n_flowing_snapshots=flowing, n_jammed_snapshots=0, cpu_seconds=3600.0, bytes=10**6,
             snapshot_interval=0.1, decorrelation=dict(viscosity=0.2, pressure=0.2, z_mu=0.2),
             transient=0.3, arrested=dict(pressure=np.array([]), z_mu=np.array([])),
-            log_viscosity_series=None if status == "jammed" else (np.array([0.0, 1.0]), np.zeros(2)),
+            log_viscosity_series=(np.array([0.0, 1.0]), np.zeros(2), stress),
         )  # fmt: skip
 
     records = [
@@ -178,3 +179,41 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
     assert "40 snapshots of finished runs" in card and "1 unfinished run(s) (status interrupted" in card
     assert "| 2000 | 0.80 | 20 | 2 | 1000 ± 50 |" in card
     assert "| 2000 | 0.80 | 50 | 1 (unfinished) | 1000 ± 50 |" in card
+
+
+def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_strain_1():
+    """Two state points x 3 seeds, runs to strain 4 whose log η_r sits 0.2 high until strain 1.2 (noise
+    0.1 per row): the card's decorrelation row names the transient (end of the block [1, 1.5), below the
+    reference window from 2) and the bias counting from strain 1 adds, 0.2 x 0.2 / 3 = +0.013."""
+    from rheograph.dataset_card import card_markdown
+
+    rng = np.random.default_rng(0)
+    strain = np.arange(0.0, 4.0, 0.01)
+    records = [
+        dict(
+            n=400,
+            phi=0.7,
+            stress=stress,
+            seed=seed,
+            status="completed",
+            n_snapshots=10,
+            n_flowing_snapshots=10,
+            n_jammed_snapshots=0,
+            cpu_seconds=60.0,
+            bytes=10**5,
+            snapshot_interval=0.2,
+            decorrelation=dict(viscosity=0.1, pressure=0.1, z_mu=0.1),
+            transient=1.0,
+            arrested=dict(pressure=np.array([]), z_mu=np.array([])),
+            log_viscosity_series=(
+                strain,
+                np.where(strain < 1.2, 0.2, 0.0) + 0.1 * rng.normal(size=400),
+                stress,
+            ),
+        )  # fmt: skip
+        for stress in (1.0, 2.0)
+        for seed in (1, 2, 3)
+    ]
+    card = card_markdown(records, [], "python simulate.py -m …", 1.0)
+    row = next(line for line in card.splitlines() if line.startswith("| 400 | 0.70 | 0.100"))
+    assert re.search(r"\| 1\.5 \| \+0\.01[1-5]; largest \+0\.01[1-5] \(σ/σ0 = [12]\) \|", row), row

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rheograph.errors import InputError
+
 
 def steady_state_summary(
     strain: np.ndarray,
@@ -126,67 +128,97 @@ def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals:
 
 
 def ensemble_transient(
-    runs: list[tuple[np.ndarray, np.ndarray]],
-    reference_from: float,
+    runs: list[tuple[np.ndarray, np.ndarray, object]],
     counted_from: float,
     block: float = 0.5,
+    alpha: float = 0.05,
 ) -> dict:
-    """Start-up transient of a set of runs at one state family, measured on their average.
+    """Start-up transient of the runs of one (N, φ), resolved on their ensemble.
 
-    One run's block means are too noisy to resolve a slow relaxation of a few per cent; averaged over the
-    runs of an (N, φ) they are not.  Per run, the means of ``values`` over ``block``-strain blocks below
-    ``reference_from`` minus the run's mean over strain >= ``reference_from``; averaged over the runs
-    (each run counted once), with the standard error over runs.
+    One run's block means are too noisy to resolve a slow drift of a few per cent; the runs of an (N, φ)
+    together can -- but the drift's sign may depend on the state point, so runs are compared within their
+    state point and never averaged across state points.  Per run, the mean of ``values`` over each
+    ``block``-strain block before its reference window (the second half of its strain beyond
+    ``counted_from``, rounded down to a whole block) minus the window's mean, in units of the run's
+    standard deviation there.  Each block is tested two ways, the smaller p value doubled: an F test
+    for any state point's mean offset differing from 0 (sum over state points of n_g x mean_g^2 over
+    their count, against the scatter between runs of one state point, pooled), and a t test for a drift
+    of one sign (the state points' mean offsets, k - 1 degrees of freedom), which the F test, spread over
+    k state points, resolves poorly.  Significant below ``alpha`` / (number of blocks) -- Bonferroni
+    bounds, so that stationary runs report a transient in at most ``alpha`` of ensembles.
 
-    runs: (strain, values) per run, each (T,) with rows at a fixed strain interval (the time series).
-    Returns ``block_start`` (B,), ``offset`` and ``offset_se`` (B,) -- NaN where fewer than 2 runs
-    reach a block --, ``transient``: the end of the last block whose offset exceeds 2 standard
-    errors (0 when none does; ``reference_from`` is its ceiling), and ``bias``/``bias_se``: the mean
-    over runs of (mean over strain >= ``counted_from``) - (mean over strain >= ``transient``), i.e. what
-    counting a run from ``counted_from`` adds to its steady mean.  NaN entries when no run reaches
-    ``reference_from`` + ``block``."""
-    starts = np.arange(0.0, reference_from - 1e-9, block)
-    offsets, biases = [], []
-    for strain, values in runs:
+    runs: (strain (T,), values (T,), state point key) per run; each run's rows are weighted equally.
+    Returns ``block_start`` (B,) and ``p_value`` (B,) (NaN where it cannot be tested), ``transient``: the
+    end of the last significant block (0 when none; ``ceiling``, the earliest reference window, is its
+    largest value: ``at_ceiling`` says the drift may continue into the window), and the bias that counting
+    each run from ``counted_from`` instead of from the transient adds to its mean (in ``values``' units):
+    ``bias_mean`` over runs, ``bias_largest`` the largest |mean over a state point's runs|, signed, at
+    state point ``bias_largest_at``; ``n_runs`` used.  NaN entries when fewer than 2 state points hold 2
+    runs that reach a reference window (no within-state-point scatter to test against)."""
+    from scipy.stats import f as f_distribution
+    from scipy.stats import t as t_distribution
+
+    if not (np.isfinite(block) and block > 0):
+        raise InputError(f"block={block!r} is invalid: allowed a positive strain")
+    if not (np.isfinite(counted_from) and counted_from >= 0):
+        raise InputError(f"counted_from={counted_from!r} is invalid: allowed a strain >= 0")
+    usable = []
+    for strain, values, key in runs:
         strain, values = np.asarray(strain, dtype=np.float64), np.asarray(values, dtype=np.float64)
-        if strain.size == 0 or strain.max() < reference_from + block:
+        if strain.size == 0:
             continue
-        reference = values[strain >= reference_from].mean()
-        offsets.append(
-            [
-                values[(strain >= s) & (strain < s + block)].mean() - reference
-                if np.any((strain >= s) & (strain < s + block))
-                else np.nan
-                for s in starts
-            ]
-        )
-        biases.append((strain, values))
+        reference_from = np.floor(0.5 * (counted_from + strain.max()) / block + 1e-9) * block
+        window = values[strain >= reference_from]
+        if reference_from < block or strain.max() - reference_from < block or window.std() == 0:
+            continue
+        usable.append((strain, values, key, reference_from, window.mean(), window.std()))
     nan = float("nan")
-    if not offsets:
-        return dict(
-            block_start=starts,
-            offset=starts * nan,
-            offset_se=starts * nan,
-            transient=nan,
-            bias=nan,
-            bias_se=nan,
-        )
-    table = np.array(offsets)
-    counts = np.isfinite(table).sum(axis=0)
-    offset = np.where(counts >= 2, np.nanmean(table, axis=0), nan) if table.size else table
-    with np.errstate(invalid="ignore", divide="ignore"):
-        offset_se = np.where(counts >= 2, np.nanstd(table, axis=0, ddof=1) / np.sqrt(counts), nan)
-    significant = np.flatnonzero(np.isfinite(offset) & (np.abs(offset) > 2.0 * offset_se))
+    empty = dict(block_start=np.zeros(0), p_value=np.zeros(0), transient=nan, ceiling=nan, at_ceiling=False,
+                 bias_mean=nan, bias_largest=nan, bias_largest_at=None, n_runs=len(usable))  # fmt: skip
+    keys = [u[2] for u in usable]
+    replicated = {k for k in keys if keys.count(k) >= 2}
+    if len(replicated) < 2:
+        return empty
+    ceiling = min(u[3] for u in usable)
+    starts = np.arange(0.0, ceiling - 1e-9, block)
+    offsets = np.full((len(usable), starts.size), nan)
+    for i, (strain, values, _, _, centre, spread) in enumerate(usable):
+        for b, s in enumerate(starts):
+            inside = (strain >= s) & (strain < s + block)
+            if inside.any():
+                offsets[i, b] = (values[inside].mean() - centre) / spread
+    p_value = np.full(starts.size, nan)
+    for b in range(starts.size):
+        groups = [offsets[[i for i, k in enumerate(keys) if k == key], b] for key in dict.fromkeys(keys)]
+        groups = [g[np.isfinite(g)] for g in groups]
+        groups = [g for g in groups if g.size]
+        dof = sum(g.size - 1 for g in groups)
+        if dof == 0:
+            continue
+        within = sum(((g - g.mean()) ** 2).sum() for g in groups) / dof
+        between = sum(g.size * g.mean() ** 2 for g in groups) / len(groups)
+        if within == 0:
+            continue
+        p_any = f_distribution.sf(between / within, len(groups), dof)
+        # a drift of one sign at every state point: t test on the state points' means (k - 1 dof)
+        means = np.array([g.mean() for g in groups])
+        spread = means.std(ddof=1) / np.sqrt(means.size)
+        p_common = 2 * t_distribution.sf(abs(means.mean()) / spread, means.size - 1) if spread > 0 else nan
+        p_value[b] = min(1.0, 2 * np.nanmin([p_any, p_common]))
+    significant = np.flatnonzero(p_value < alpha / max(starts.size, 1))
     transient = float(starts[significant[-1]] + block) if significant.size else 0.0
-    bias = np.array(
-        [v[s >= counted_from].mean() - v[s >= max(transient, counted_from)].mean() for s, v in biases]
-    )
-    bias_se = float(bias.std(ddof=1) / np.sqrt(bias.size)) if bias.size > 1 else nan
+    start = max(transient, counted_from)
+    bias = np.array([v[s >= counted_from].mean() - v[s >= start].mean() for s, v, *_ in usable])
+    by_point = {key: bias[[i for i, k in enumerate(keys) if k == key]].mean() for key in dict.fromkeys(keys)}
+    largest_at = max(by_point, key=lambda key: abs(by_point[key]))
     return dict(
         block_start=starts,
-        offset=offset,
-        offset_se=offset_se,
+        p_value=p_value,
         transient=transient,
-        bias=float(bias.mean()),
-        bias_se=bias_se,
+        ceiling=float(ceiling),
+        at_ceiling=bool(transient >= ceiling - 1e-9),
+        bias_mean=float(bias.mean()),
+        bias_largest=float(by_point[largest_at]),
+        bias_largest_at=largest_at,
+        n_runs=len(usable),
     )

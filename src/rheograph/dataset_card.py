@@ -31,9 +31,6 @@ from rheograph.io.index import USABLE, build_index, write_index
 from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
-# Reference window of the ensemble transient: every run of the set reaches strain 3, so strain >= 2 leaves
-# each at least one strain (>= 10 decorrelation strains) to compare the earlier blocks with.
-ENSEMBLE_REFERENCE_STRAIN = 2.0
 
 
 def run_cpu_seconds(path: str | Path) -> float:
@@ -110,7 +107,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 transient=transient_strain(strain, series["viscosity"], p["steady_state_strain"])
                 if flowing
                 else np.nan,
-                log_viscosity_series=(strain, series["viscosity"]) if flowing else None,
+                log_viscosity_series=(strain, series["viscosity"], p["stress"]),
                 cpu_seconds=cpu,
                 bytes=path.stat().st_size,
             )
@@ -120,11 +117,17 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
 
 def _ensemble_transient_cells(runs: list[dict], min_strain: float) -> str:
     """The ensemble-transient and bias cells of the decorrelation table for the runs of one (N, φ)."""
-    series = [r["log_viscosity_series"] for r in runs if r["log_viscosity_series"] is not None]
-    result = ensemble_transient(series, ENSEMBLE_REFERENCE_STRAIN, min_strain)
+    series = [r["log_viscosity_series"] for r in runs if r["status"] == "completed"]
+    result = ensemble_transient(series, min_strain)
     if not np.isfinite(result["transient"]):
         return "– | –"
-    return f"{result['transient']:.1f} | {result['bias']:+.3f} ± {result['bias_se']:.3f}"
+    transient = ("≥ " if result["at_ceiling"] else "") + f"{result['transient']:.1f}"
+    if result["transient"] <= min_strain:
+        return f"{transient} | 0"
+    return (
+        f"{transient} | {result['bias_mean']:+.3f}; largest {result['bias_largest']:+.3f} "
+        f"(σ/σ0 = {result['bias_largest_at']:g})"
+    )
 
 
 def flow_curve_cell(point: dict, key: str, records: list[dict]) -> str:
@@ -267,15 +270,17 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         "Transient: the strain after which 0.1-strain block means of log η_r stay within 2 standard "
         "deviations of the steady ones (searched below the steady window's start, so 1.0 means: not "
         "settled before it in that run).  Ensemble transient: one run cannot resolve a drift of a few per "
-        "cent, the average over the runs of an (N, φ) can -- per run, 0.5-strain block means of log η_r "
-        f"relative to its mean over strain ≥ {ENSEMBLE_REFERENCE_STRAIN:g}, averaged over the flowing runs; "
-        "the transient ends with the last block more than 2 standard errors (over runs) away from 0 "
-        f"({ENSEMBLE_REFERENCE_STRAIN:g}, the reference window's start, is its ceiling: still drifting "
-        "there).  "
+        "cent, the runs of an (N, φ) together can (`rheograph.analysis.ensemble_transient`): per run, "
+        "0.5-strain block means of log η_r relative to its mean over the second half of its strain beyond "
+        f"{min_strain:g}, in units of its standard deviation there; each block tested for a mean offset at "
+        "any state point (F test against the scatter between seeds) or of one sign at all (t test over "
+        "state points), at 5 % with a Bonferroni bound over blocks; the transient ends with the last "
+        "significant block (≥: still drifting at the earliest reference window).  "
         f"Bias from strain {min_strain:g}: what counting each run from strain {min_strain:g} instead of "
-        "from the ensemble transient adds to its mean log η_r (mean ± standard error over runs; 0.01 is "
-        "1 %).  The snapshots of that stretch stay in the learning set: their targets are their own "
-        "instantaneous values, right for their configurations whether or not the run has settled.  "
+        "from the ensemble transient adds to its mean log η_r, mean over runs and the largest over state "
+        "points (mean over its seeds; 0.01 is 1 %).  The snapshots of that stretch stay in the learning "
+        "set: their targets are their own instantaneous values, right for their configurations whether "
+        "or not the run has settled.  "
         "Neighbour correlation: exp(−Δγ/τ) for the snapshot spacing Δγ and the median decorrelation "
         "strain τ of log η_r (1/e at Δγ = τ).",
         "",
