@@ -444,8 +444,8 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
 
 def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
     """Folds trained on some trajectory files are never mixed with folds of changed files: after a run was
-    extended, resuming into the directory is refused by name; the same files copied elsewhere (a clone)
-    are the same data."""
+    extended, resuming into the directory is refused by name, and so it is when the directory's record of
+    its data is missing; the same files copied elsewhere (a clone) are the same data."""
     import shutil
 
     from rheograph.errors import OtherRunError
@@ -467,6 +467,9 @@ def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
     run_state_point(extended, copies / "s5.h5", progress=False)
     assert data_fingerprint(sorted(copies.glob("*.h5"))) != data_fingerprint(tiny_files)
     with pytest.raises(OtherRunError, match="other data"):
+        train_folds(compose_train(base), run_dir)
+    (run_dir / "data_fingerprint.txt").unlink()  # finished folds without a record of their data
+    with pytest.raises(OtherRunError, match="did not record"):
         train_folds(compose_train(base), run_dir)
 
 

@@ -319,13 +319,15 @@ def run_stamps(cfg: DictConfig) -> dict[str, str]:
 
 
 def stamps_differ(run_dir: Path, stamps: dict[str, str]) -> list[str]:
-    """The stamp files of ``run_dir`` that hold something else than ``stamps`` (a missing one does not:
-    directories written before the data stamp existed get it when resumed)."""
-    return [
-        name
-        for name, value in stamps.items()
-        if (run_dir / name).exists() and (run_dir / name).read_text().strip() != value
-    ]
+    """The stamp files of ``run_dir`` that hold something else than ``stamps``, or are missing next to
+    finished folds (what those folds were trained with is then unknown: never stamped after the fact)."""
+    trained = any(run_dir.glob("fold*_result.json"))
+
+    def differs(name: str, value: str) -> bool:
+        path = run_dir / name
+        return path.read_text().strip() != value if path.exists() else trained
+
+    return [name for name, value in stamps.items() if differs(name, value)]
 
 
 def check_resumable(cfg: DictConfig, run_dir: Path) -> None:
@@ -342,7 +344,7 @@ def check_resumable(cfg: DictConfig, run_dir: Path) -> None:
     if differ:
         raise OtherRunError(
             f"{run_dir} holds folds trained on other data (trajectory files added, removed, extended or "
-            "resimulated since): train into a new directory"
+            "resimulated since) or on data it did not record: train into a new directory"
         )
     for name, value in stamps.items():
         (run_dir / name).write_text(value + "\n")
