@@ -185,7 +185,9 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         command,
         "```",
         "",
-        f"Flowing snapshots count from strain {min_strain:g} on (start-up transient skipped).  A run whose "
+        f"Flowing snapshots count from strain {min_strain:g} on (the start-up transient skipped; a slower "
+        "drift of a few per cent that outlasts it at some (N, φ) is measured in the decorrelation table).  "
+        "A run whose "
         "flow stops ends with status `jammed` and one last snapshot of the arrested packing; its snapshots "
         "from the start of the stalled window on are labelled jammed (kept at any strain: an arrested "
         "packing is not a transient): their Π and Z_μ (the static packing under load) are valid targets, "

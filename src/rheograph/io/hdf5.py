@@ -304,7 +304,9 @@ def read_params(path: str | Path) -> dict:
 def data_fingerprint(paths) -> str:
     """Hash of what trajectory files hold — parameters, status, strain and steps reached — not of where
     they lie or when they were copied: equal for a clone of the same data; different once a file is added
-    or removed, a run extended, or a state point resimulated with other parameters."""
+    or removed, a run extended, or a state point resimulated with other parameters (a resimulation with
+    the same parameters to the same strain in the same number of steps is not told apart: changed dynamics
+    change the step count)."""
     import hashlib
 
     identities = []
