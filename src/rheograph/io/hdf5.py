@@ -202,11 +202,7 @@ class TrajectoryFile:
         if "positions" not in cp:
             h5.close()
             raise TrajectoryFileError(f"{self.path}: checkpoint is incomplete; move the file away")
-        state = SimState(
-            **{name: cp[name][()] for name in SimState.ARRAYS},
-            **{name: cp.attrs[name] for name in SimState.SCALARS if name in cp.attrs},
-        )
-        state.steps = int(state.steps)
+        state = _state_from_checkpoint(cp)
         counters = json.loads(cp.attrs["counters"])
         # drop rows written after the checkpoint: they will be recomputed identically
         for name in TIMESERIES_SCALARS + TIMESERIES_TENSORS:
@@ -323,6 +319,26 @@ def data_fingerprint(paths) -> str:
             json.dumps([info[k] for k in ("params", "status", "strain", "steps")], sort_keys=True)
         )
     return hashlib.sha1("\n".join(sorted(identities)).encode()).hexdigest()[:16]
+
+
+def read_checkpoint(path: str | Path) -> tuple[SimParams, SimState]:
+    """The parameters and the exact state at the checkpoint of a trajectory file, read only (the file is
+    left as it is: for analyses that continue a run without extending it)."""
+    with h5py.File(path, "r") as h5:
+        if "checkpoint" not in h5 or "positions" not in h5["checkpoint"]:
+            raise TrajectoryFileError(f"{path}: no checkpoint")
+        return SimParams.from_mapping(json.loads(h5.attrs["params"])), _state_from_checkpoint(
+            h5["checkpoint"]
+        )
+
+
+def _state_from_checkpoint(cp: h5py.Group) -> SimState:
+    state = SimState(
+        **{name: cp[name][()] for name in SimState.ARRAYS},
+        **{name: cp.attrs[name] for name in SimState.SCALARS if name in cp.attrs},
+    )
+    state.steps = int(state.steps)
+    return state
 
 
 def read_run_info(path: str | Path) -> dict:
