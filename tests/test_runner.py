@@ -620,3 +620,28 @@ def test_an_area_fraction_above_jamming_is_refused_by_name_not_relaxed_for_ever(
         *SimParams(**TINY).species_counts(), 1.4, SimParams(**TINY).box_length(), 1
     )
     assert np.isfinite(positions).all()  # the same call relaxes a flowing area fraction
+
+
+def test_read_checkpoint_gives_the_state_a_resume_continues_from(tmp_path):
+    """``read_checkpoint`` (analyses that continue a run without extending it) returns the parameters and
+    every array and scalar of the state the writer resumes from (``TrajectoryFile.open_existing``, on a
+    copy), and leaves the file as it was."""
+    import shutil
+
+    from rheograph.io.hdf5 import TrajectoryFile, read_checkpoint
+    from rheograph.sim.integrator import SimState
+
+    path, copy = tmp_path / "run.h5", tmp_path / "copy.h5"
+    run_state_point(SimParams(**TINY), path, progress=False)
+    shutil.copy(path, copy)
+    before = path.read_bytes()
+    params, state = read_checkpoint(path)
+    assert path.read_bytes() == before
+    writer = TrajectoryFile(copy, params)
+    resumed, _ = writer.open_existing()
+    writer.close()
+    for name in SimState.ARRAYS:
+        np.testing.assert_array_equal(getattr(state, name), getattr(resumed, name), err_msg=name)
+    for name in SimState.SCALARS:
+        assert getattr(state, name) == getattr(resumed, name), name
+    assert state.steps > 0 and params.to_dict() == SimParams(**TINY).to_dict()
