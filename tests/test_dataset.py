@@ -125,6 +125,19 @@ def test_jamming_onset_per_seed_names_what_is_still_open():
     assert jamming_onset(runs(s20="completed", s50="interrupted")) == "none up to 20 (50 unfinished)"
     assert jamming_onset(runs(s14="running", s20="jammed", s100="running")) == "20 (14 unfinished)"
     assert jamming_onset(runs(s0_5="interrupted")) == "none up to 0 (0.5 unfinished)"
+    stalling = runs(s20="completed", s100="interrupted")
+    stalling[1]["stalled_since"] = 0.884
+    assert jamming_onset(stalling) == "none up to 20 (100 unfinished; 100 stalling since strain 0.88)"
+
+
+def test_stall_start_is_where_the_trailing_slow_rows_begin():
+    from rheograph.analysis import stall_start
+
+    strain = np.array([0.85, 0.86, 0.87, 0.88, 0.884, 0.884])
+    assert stall_start(strain, [0, 1, 0, 0, 1, 1]) == 0.884
+    assert stall_start(strain, [1] * 6) == 0.85
+    assert stall_start(strain, [1, 1, 1, 1, 1, 0]) is None
+    assert stall_start([], []) is None
 
 
 def test_flow_curve_cell_reports_the_arrested_packing_instead_of_nan():

@@ -111,6 +111,17 @@ def transient_strain(strain, values, steady_from: float, block: float = 0.1) -> 
     return float(edges[outside[-1]] + block) if outside.size else 0.0
 
 
+def stall_start(strain, slow) -> float | None:
+    """The strain from which every row of a time series is flagged ``slow`` (its interval slower than the
+    jam viscosity), or None when the last row is not: a run stalling into arrest, before the jam detector's
+    window is full.  strain, slow: (T,)."""
+    slow = np.asarray(slow, dtype=bool)
+    if slow.size == 0 or not slow[-1]:
+        return None
+    first = 0 if slow.all() else slow.size - int(np.argmin(slow[::-1]))
+    return float(np.asarray(strain)[first])
+
+
 def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals: int) -> np.ndarray:
     """(S,) bool: the snapshots of a run taken after its flow stopped.
 

@@ -23,6 +23,7 @@ from rheograph.analysis import (
     decorrelation_strain,
     ensemble_transient,
     jammed_snapshots,
+    stall_start,
     transient_strain,
 )
 from rheograph.errors import InputError, one_line_errors
@@ -76,6 +77,10 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 "z_mu": ts["z_mu"][()],
             }
             snap_strain = sn["strain"][()]
+            # an unfinished run whose last rows are each slower than jam_viscosity: stalling, not yet
+            # called jammed (the detector's window is not full); the strain where the stall began
+            slow = ts["jammed"][()] if "jammed" in ts else np.zeros(strain.size, dtype=bool)
+            stalled_since = stall_start(strain, slow) if entry["status"] not in USABLE else None
             jammed = jammed_snapshots(
                 entry["status"], snap_strain, strain, p.get("jam_intervals", SimParams.jam_intervals)
             )
@@ -108,6 +113,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 if flowing
                 else np.nan,
                 log_viscosity_series=(strain, series["viscosity"], p["stress"]),
+                stalled_since=stalled_since,
                 cpu_seconds=cpu,
                 bytes=path.stat().st_size,
             )
@@ -156,14 +162,19 @@ def flow_curve_cell(point: dict, key: str, records: list[dict]) -> str:
 def jamming_onset(runs: list[dict]) -> str:
     """The smallest σ/σ0 at which one seed's runs (records with ``stress`` and ``status``) shear-jammed,
     or ``none up to`` the largest that completed; unfinished runs below the onset leave it open and
-    are named."""
+    are named, with the strain since which a stalling one's rows are each slower than jam_viscosity."""
     jammed = sorted(r["stress"] for r in runs if r["status"] == "jammed")
     flowed = [r["stress"] for r in runs if r["status"] == "completed"]
     limit = jammed[0] if jammed else np.inf
     open_runs = sorted(
-        r["stress"] for r in runs if r["status"] not in ("jammed", "completed") and r["stress"] < limit
+        (r["stress"], r.get("stalled_since"))
+        for r in runs
+        if r["status"] not in ("jammed", "completed") and r["stress"] < limit
     )
-    pending = f" ({', '.join(f'{x:g}' for x in open_runs)} unfinished)" if open_runs else ""
+    stalls = "".join(
+        f"; {x:g} stalling since strain {since:.2f}" for x, since in open_runs if since is not None
+    )
+    pending = f" ({', '.join(f'{x:g}' for x, _ in open_runs)} unfinished{stalls})" if open_runs else ""
     return f"{jammed[0]:g}{pending}" if jammed else f"none up to {max(flowed, default=0):g}{pending}"
 
 
