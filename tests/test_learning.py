@@ -442,6 +442,58 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
         train_folds(compose_train([*base, "model.hidden=16"]), run_dir)
 
 
+def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_result(tiny_files, tmp_path):
+    """A fold stopped after two of its four epochs (an exception where a kill would land) resumes from
+    its last finished epoch — it trains epochs 2 and 3 only — and ends bit for bit where the uninterrupted
+    fold ends (weights, optimiser, schedule, best so far and torch's random draws carried over); the
+    finished fold leaves no resume state behind."""
+    from lightning.pytorch.callbacks import Callback
+
+    from rheograph.learn.train import train_folds
+
+    class Stop(Callback):
+        def on_train_epoch_start(self, trainer, module):
+            if trainer.current_epoch == 2:
+                raise RuntimeError("stopped mid-fold")
+
+    class Epochs(Callback):
+        def __init__(self):
+            self.trained = []
+
+        def on_train_epoch_start(self, trainer, module):
+            self.trained.append(trainer.current_epoch)
+
+    cfg = compose_train(
+        [*quick_folds(tiny_files, tmp_path), "fold=1", "report=false", "trainer.max_epochs=4"]
+    )
+    reference = train_folds(cfg, tmp_path / "uninterrupted")
+    run_dir = tmp_path / "run"
+    with pytest.raises(RuntimeError, match="stopped mid-fold"):
+        train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [Stop()])
+    assert (run_dir / "fold1" / "resume" / "last.ckpt").exists()
+    assert not (run_dir / "fold1_result.json").exists()
+    epochs = Epochs()
+    resumed = train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [epochs])
+    assert epochs.trained == [2, 3]
+    np.testing.assert_equal(resumed, reference)  # every metric identical (NaN where undefined in both)
+    with (
+        np.load(run_dir / "fold1_predictions.npz") as a,
+        np.load(tmp_path / "uninterrupted" / "fold1_predictions.npz") as b,
+    ):
+        np.testing.assert_array_equal(a["pred"], b["pred"])
+    assert not (run_dir / "fold1" / "resume").exists()
+
+    # a resume point cut short (killed while writing it) is set aside: the fold trains again from epoch 0
+    run_dir = tmp_path / "cut"
+    with pytest.raises(RuntimeError, match="stopped mid-fold"):
+        train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [Stop()])
+    resume_point = run_dir / "fold1" / "resume" / "last.ckpt"
+    resume_point.write_bytes(resume_point.read_bytes()[:1000])
+    epochs = Epochs()
+    np.testing.assert_equal(train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [epochs]), reference)
+    assert epochs.trained == [0, 1, 2, 3]
+
+
 def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
     """Folds trained on some trajectory files are never mixed with folds of changed files: after a run was
     extended, resuming into the directory is refused by name, and so it is when the directory's record of

@@ -129,6 +129,25 @@ def _spread(values: torch.Tensor) -> torch.Tensor:
     return torch.where(std > 1e-6, std, torch.ones_like(std))
 
 
+class FoldResumePoint(L.pytorch.callbacks.ModelCheckpoint):
+    """Saves a fold's whole training state after every epoch as ``<dirpath>/last.ckpt`` (weights,
+    optimiser, schedule, early stopping, best so far) and with it torch's global random generator — the
+    only one training draws from (shuffles, dropout; numpy draws are seeded generators) —, so that a fold
+    resumed from it ends where the uninterrupted fold would have."""
+
+    def __init__(self, dirpath):
+        # no monitor: the one kept checkpoint is the latest epoch's, always under the same name
+        super().__init__(dirpath=dirpath, filename="last", save_top_k=1, enable_version_counter=False)
+
+    def state_dict(self) -> dict:
+        return {**super().state_dict(), "torch_random_state": torch.get_rng_state()}
+
+    def load_state_dict(self, state_dict: dict) -> None:
+        state = dict(state_dict)
+        torch.set_rng_state(state.pop("torch_random_state"))
+        super().load_state_dict(state)
+
+
 class SurrogateModule(L.LightningModule):
     """ResGCN + weighted Huber loss (``huber_beta``) over standardised targets (η_r masked on jammed
     snapshots), Adam.

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import warnings
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
-from rheograph.learn.module import TARGET_NAMES, fold_metrics, physical_targets
+from rheograph.learn.module import TARGET_NAMES, FoldResumePoint, fold_metrics, physical_targets
 from rheograph.naming import state_point_key
 
 log = logging.getLogger("rheograph.train")
@@ -119,6 +120,14 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
     return dm, module
 
 
+def _readable_checkpoint(path: Path) -> bool:
+    try:
+        torch.load(path, map_location="cpu", weights_only=False)
+    except Exception:  # truncated or garbage: whatever the unpickler raises
+        return False
+    return True
+
+
 def train_fold(
     cfg: DictConfig, run_dir: Path, k: int, settings: GraphSettings, extra_callbacks: list = ()
 ) -> tuple[dict, dict]:
@@ -129,12 +138,24 @@ def train_fold(
     L.seed_everything(int(cfg.seed) + k, workers=True)
     dm, module = setup_fold(cfg, k, settings)
     dm.save_split(run_dir / f"fold{k}_split.json")
+    # a fold killed mid-way resumes from its last finished epoch, not its first (check_resumable has
+    # already refused another configuration or other data in this run directory)
+    resume_dir = run_dir / f"fold{k}" / "resume"
+    resume_point = resume_dir / "last.ckpt"
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] + list(extra_callbacks)
+    resume = FoldResumePoint(resume_dir)
     logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
     trainer = instantiate(
-        cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=str(run_dir / f"fold{k}")
+        cfg.trainer, callbacks=[*callbacks, resume], logger=logger, default_root_dir=str(run_dir / f"fold{k}")
     )
-    trainer.fit(module, datamodule=dm)
+    if resume_point.exists() and not _readable_checkpoint(resume_point):
+        log.warning(
+            "fold %d: %s is unreadable (killed while writing it?): the fold starts again", k, resume_point
+        )
+        resume_point.unlink()
+    if resume_point.exists():
+        log.info("fold %d: resuming from its last finished epoch (%s)", k, resume_point)
+    trainer.fit(module, datamodule=dm, ckpt_path=str(resume_point) if resume_point.exists() else None)
     ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
     if ckpt is not None and ckpt.best_model_path:
         state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
@@ -167,6 +188,7 @@ def train_fold(
         for name, value in fold_metrics(model_pred, true, groups, meta["jammed"]).items():
             result[f"baseline/{model_name}/{name}"] = value
     save_finished_fold(run_dir, k, result, prediction)
+    shutil.rmtree(resume_dir, ignore_errors=True)  # finished: the bundle is what is kept
     if logger:
         logger.log_hyperparams(
             _flat_hparams(cfg),
