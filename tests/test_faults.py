@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from conftest import tiny_training_overrides
 
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
@@ -133,7 +134,61 @@ def test_debug_flag_shows_the_traceback(tmp_path):
     assert done.returncode != 0 and "Traceback" in done.stderr
 
 
-def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterrupted_run(tmp_path):
+def tiny_run_command(root) -> list[str]:
+    """simulate.py on the tiny preset: ~6 s of stepping, a checkpoint every 0.3 s of wall time."""
+    return [
+        sys.executable,
+        str(ROOT / "simulate.py"),
+        "sim=tiny",
+        "sim.phi=0.76",
+        "sim.stress=20",
+        "sim.strain=2.0",
+        "sim.checkpoint_wall_seconds=0.3",
+        f"output_root={root}",
+        "progress=false",
+    ]
+
+
+def assert_same_trajectory(ref_file, other_file):
+    """Time series and snapshots equal bit for bit."""
+    import h5py
+    import numpy as np
+
+    from rheograph.io.hdf5 import read_timeseries
+
+    a, b = read_timeseries(ref_file), read_timeseries(other_file)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    with h5py.File(ref_file) as h1, h5py.File(other_file) as h2:
+        for key in ("positions", "contact_pairs", "contact_stretch", "viscosity"):
+            np.testing.assert_array_equal(h1["snapshots"][key][()], h2["snapshots"][key][()], err_msg=key)
+
+
+def start_stepping(root, timeout=120.0):
+    """simulate.py started and stepping (its trajectory file exists: imports and numba cache, 2-3 s, are
+    behind it)."""
+    import time
+
+    proc = subprocess.Popen(tiny_run_command(root), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None and not list(Path(root).glob("*/trajectory.h5")):
+        assert time.monotonic() < deadline, "simulate.py did not start stepping within 120 s"
+        time.sleep(0.05)
+    return proc
+
+
+@pytest.fixture(scope="module")
+def tiny_reference(tmp_path_factory):
+    """The uninterrupted run of ``tiny_run_command``, shared by the interruption tests."""
+    root = tmp_path_factory.mktemp("reference")
+    reference = subprocess.run(tiny_run_command(root), capture_output=True, text=True, timeout=300)
+    assert reference.returncode == 0, reference.stderr[-2000:]
+    return next(root.glob("*/trajectory.h5"))
+
+
+def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterrupted_run(
+    tiny_reference, tmp_path
+):
     """SIGKILL (no handler, no final checkpoint) three times at seeded random moments, then run to the
     end: the time series and snapshots equal those of a run never interrupted, bit for bit."""
     import signal
@@ -141,53 +196,75 @@ def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterru
 
     import numpy as np
 
-    from rheograph.io.hdf5 import read_timeseries
-
-    def command(root):
-        return [
-            sys.executable,
-            str(ROOT / "simulate.py"),
-            "sim=tiny",
-            "sim.phi=0.76",
-            "sim.stress=20",
-            "sim.strain=2.0",  # ~6 s of stepping: three kills of <= 1.5 s of progress each fit in
-            "sim.checkpoint_wall_seconds=0.3",
-            f"output_root={root}",
-            "progress=false",
-        ]
-
-    reference = subprocess.run(command(tmp_path / "ref"), capture_output=True, text=True, timeout=300)
-    assert reference.returncode == 0, reference.stderr[-2000:]
     rng = np.random.default_rng(7)
     killed = 0
     for _ in range(3):
-        proc = subprocess.Popen(
-            command(tmp_path / "cut"), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-        )
-        # kill while stepping, not during start-up (imports, numba cache: 2-3 s, machine-dependent): the
-        # trajectory file appears when stepping begins; then a random moment between checkpoints
-        deadline = time.monotonic() + 120
-        while proc.poll() is None and not list((tmp_path / "cut").glob("*/trajectory.h5")):
-            assert time.monotonic() < deadline, "simulate.py did not start stepping within 120 s"
-            time.sleep(0.05)
-        time.sleep(rng.uniform(0.2, 1.5))
+        proc = start_stepping(tmp_path / "cut")
+        time.sleep(rng.uniform(0.2, 1.5))  # a random moment between checkpoints
         if proc.poll() is None:
             proc.send_signal(signal.SIGKILL)
             killed += 1
         proc.wait()
-    final = subprocess.run(command(tmp_path / "cut"), capture_output=True, text=True, timeout=300)
+    final = subprocess.run(tiny_run_command(tmp_path / "cut"), capture_output=True, text=True, timeout=300)
     assert final.returncode == 0, final.stderr[-2000:]
     assert killed >= 1  # the run must really have been killed mid-way at least once
-    ref_file = next((tmp_path / "ref").glob("*/trajectory.h5"))
-    cut_file = next((tmp_path / "cut").glob("*/trajectory.h5"))
-    a, b = read_timeseries(ref_file), read_timeseries(cut_file)
-    for key in a:
-        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
-    import h5py
+    assert_same_trajectory(tiny_reference, next((tmp_path / "cut").glob("*/trajectory.h5")))
 
-    with h5py.File(ref_file) as h1, h5py.File(cut_file) as h2:
-        for key in ("positions", "contact_pairs", "contact_stretch", "viscosity"):
-            np.testing.assert_array_equal(h1["snapshots"][key][()], h2["snapshots"][key][()], err_msg=key)
+
+def test_a_write_failing_for_lack_of_space_stops_with_one_line_and_the_run_resumes_whole(
+    tiny_reference, tmp_path
+):
+    """A file-size limit hit mid-run (RLIMIT_FSIZE: what a full disk or a quota does to a write; before,
+    the half-flushed HDF5 metadata left the trajectory unreadable and the run lost): simulate.py stops
+    with one error line naming the file and what to do; the same command, with room again, resumes —
+    from the copy as of the last checkpoint where the file itself was damaged — and ends bit for bit at
+    the uninterrupted run, leaving no copy behind."""
+    import resource
+    import signal
+
+    def at_most_100_kb_per_file():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a failing write (EFBIG), not a killed process
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
+
+    limited = subprocess.run(
+        tiny_run_command(tmp_path / "cut"),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=at_most_100_kb_per_file,
+    )
+    assert limited.returncode != 0
+    # (h5py prints its own reports of objects it cannot release before that line)
+    errors = [line for line in limited.stderr.splitlines() if line.startswith("simulate.py: error:")]
+    assert len(errors) == 1, limited.stderr[-3000:]
+    assert "trajectory.h5 failed" in errors[0] and "free space and rerun" in errors[0], errors[0]
+    final = subprocess.run(tiny_run_command(tmp_path / "cut"), capture_output=True, text=True, timeout=300)
+    assert final.returncode == 0, final.stderr[-2000:]
+    cut_file = next((tmp_path / "cut").glob("*/trajectory.h5"))
+    assert_same_trajectory(tiny_reference, cut_file)
+    assert not list((tmp_path / "cut").glob("*/*.last-checkpoint*"))
+
+
+def test_a_trajectory_damaged_mid_write_resumes_from_its_last_checkpoint_copy(tiny_reference, tmp_path):
+    """Killed while HDF5 rewrote its metadata (emulated: SIGKILL, then the file cut to half): the rerun
+    sets the damaged file aside (kept as .damaged), resumes from the copy as of the last checkpoint with a
+    warning, and ends bit for bit at the uninterrupted run."""
+    import signal
+    import time
+
+    proc = start_stepping(tmp_path / "cut")
+    time.sleep(1.0)  # a few checkpoints in
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    cut_file = next((tmp_path / "cut").glob("*/trajectory.h5"))
+    assert cut_file.with_name("trajectory.h5.last-checkpoint").exists()
+    cut_file.write_bytes(cut_file.read_bytes()[: cut_file.stat().st_size // 2])
+    final = subprocess.run(tiny_run_command(tmp_path / "cut"), capture_output=True, text=True, timeout=300)
+    assert final.returncode == 0, final.stderr[-2000:]
+    assert "resuming from its copy as of the last checkpoint" in final.stdout + final.stderr
+    assert_same_trajectory(tiny_reference, cut_file)
+    assert cut_file.with_name("trajectory.h5.damaged").exists()
+    assert not cut_file.with_name("trajectory.h5.last-checkpoint").exists()
 
 
 def test_tune_with_bad_fixed_overrides_stops_before_the_first_trial(tmp_path):

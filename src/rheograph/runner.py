@@ -23,7 +23,14 @@ import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
-from rheograph.io.hdf5 import TrajectoryFile, is_compact, params_that_differ, read_run_info, rewrite
+from rheograph.io.hdf5 import (
+    TrajectoryFile,
+    TrajectoryWriteError,
+    is_compact,
+    params_that_differ,
+    read_run_info,
+    rewrite,
+)
 from rheograph.sim.integrator import Simulation, particle_pressure, viscosity
 from rheograph.sim.params import SimParams
 
@@ -136,6 +143,7 @@ def run_state_point(
         counters = {}
     traj.record_solver(sim.solver.name)
     loop = _RunLoop(params, sim, traj, counters, progress, max_steps)
+    write_failure = None
     try:
         with _StopFlag() as stop:
             try:
@@ -148,9 +156,18 @@ def run_state_point(
             summary = _summary(traj, params, status, sim.state.strain)
             summary["cpu_seconds"] = loop.cpu_seconds()
             traj.finish(status, summary)  # partial runs get a summary too; their status says so
+    except TrajectoryWriteError as exc:  # the file is whole; recording the failure in it may fail too
+        write_failure = exc
+    except OSError as exc:  # only the writer does I/O in the loop: HDF5 could not write (disk full)
+        write_failure = TrajectoryWriteError(path, exc)
     finally:
         loop.bar.close()
-        traj.close()
+        try:
+            traj.close()
+        except OSError as exc:  # HDF5's last metadata did not fit either: the copy stays for the resume
+            write_failure = write_failure or TrajectoryWriteError(path, exc)
+    if write_failure is not None:
+        raise write_failure
     if status in ("completed", "jammed"):
         compress_at_rest(path)
     if stop.signum is not None:

@@ -16,7 +16,9 @@ deterministic), so an interrupted run loses and duplicates nothing.
 from __future__ import annotations
 
 import json
+import logging
 import os
+import shutil
 from pathlib import Path
 
 import h5py
@@ -25,6 +27,8 @@ import numpy as np
 from rheograph.errors import InputError
 from rheograph.sim.integrator import SimState
 from rheograph.sim.params import SimParams
+
+log = logging.getLogger("rheograph")
 
 SCHEMA_VERSION = 1
 PRODUCER = "rheograph"
@@ -77,6 +81,37 @@ AT_REST = {
 
 class TrajectoryFileError(InputError):
     """A trajectory file is corrupt, foreign, or belongs to another state point."""
+
+
+class DamagedTrajectoryError(TrajectoryFileError):
+    """A trajectory file that cannot be read back (truncated, half-written metadata, checkpoint missing)."""
+
+
+class TrajectoryWriteError(InputError):
+    """Writing a trajectory failed (disk full, quota, file-size limit): the run stopped; says which copy
+    a rerun resumes from."""
+
+    def __init__(self, path: Path, cause: OSError, intact: bool = False):
+        where = (
+            "the file is whole as of its last checkpoint"
+            if intact
+            else f"a rerun resumes from the copy as of its last checkpoint, {last_checkpoint_copy(path).name}"
+        )
+        super().__init__(
+            f"writing {path} failed ({cause}): is the disk full or a quota reached? The run stopped; "
+            f"{where}: free space and rerun the same command to resume"
+        )
+        self.__cause__ = cause
+
+
+def last_checkpoint_copy(path: str | Path) -> Path:
+    """Where a running trajectory keeps a copy of itself as of its last checkpoint
+    (``<name>.last-checkpoint``, not ``*.h5``: no glob of trajectories picks it up).  HDF5 rewrites its
+    metadata in place, so a write that fails half-way (disk full, quota, a kill during the flush) can leave
+    the file itself unreadable; a resume then falls back to this copy.  Removed when the file is closed
+    cleanly."""
+    path = Path(path)
+    return path.with_name(path.name + ".last-checkpoint")
 
 
 def _append(ds: h5py.Dataset, values) -> None:
@@ -153,7 +188,26 @@ class TrajectoryFile:
         self.h5 = h5py.File(self.path, "r+")
 
     def open_existing(self) -> tuple[SimState, dict]:
-        """Open for resuming; verify the file and return (state, runner counters) from the checkpoint."""
+        """Open for resuming; verify the file and return (state, runner counters) from the checkpoint.
+        A file that cannot be read back is replaced by its last-checkpoint copy where one exists (the
+        damaged file kept beside it as ``<name>.damaged``)."""
+        try:
+            return self._open_existing()
+        except DamagedTrajectoryError as exc:
+            copy = last_checkpoint_copy(self.path)
+            if not copy.exists():
+                raise
+            damaged = self.path.with_name(self.path.name + ".damaged")
+            os.replace(self.path, damaged)
+            shutil.copyfile(copy, self.path)  # the copy stays until this invocation closes cleanly
+            log.warning(
+                "%s could not be read back (%s): resuming from its copy as of the last checkpoint "
+                "(%s); the damaged file is kept as %s (delete it once the run is through)",
+                self.path, exc, copy.name, damaged.name,
+            )  # fmt: skip
+            return self._open_existing()
+
+    def _open_existing(self) -> tuple[SimState, dict]:
         try:
             h5 = h5py.File(self.path, "r+")
         except OSError as exc:
@@ -165,11 +219,11 @@ class TrajectoryFile:
                     "already running?"
                 ) from exc
             if "truncated file" in message:
-                raise TrajectoryFileError(
+                raise DamagedTrajectoryError(
                     f"{self.path} is truncated ({exc}): it was not modified; move it aside (e.g. to "
                     f"{self.path.name}.corrupt) and rerun to simulate this state point afresh"
                 ) from exc
-            raise TrajectoryFileError(
+            raise DamagedTrajectoryError(
                 f"{self.path}: not a readable HDF5 file ({exc}); it was not modified; move it aside and rerun"
             ) from exc
         if h5.attrs.get("producer") != PRODUCER:
@@ -184,7 +238,7 @@ class TrajectoryFile:
             h5.move("checkpoint_new", "checkpoint")
         if "checkpoint" not in h5:
             h5.close()
-            raise TrajectoryFileError(f"{self.path}: the checkpoint is missing; move the file away")
+            raise DamagedTrajectoryError(f"{self.path}: the checkpoint is missing; move the file away")
         version = int(h5.attrs.get("schema_version", -1))
         if version != SCHEMA_VERSION:
             h5.close()
@@ -201,7 +255,7 @@ class TrajectoryFile:
         cp = h5["checkpoint"]
         if "positions" not in cp:
             h5.close()
-            raise TrajectoryFileError(f"{self.path}: checkpoint is incomplete; move the file away")
+            raise DamagedTrajectoryError(f"{self.path}: checkpoint is incomplete; move the file away")
         state = _state_from_checkpoint(cp)
         counters = json.loads(cp.attrs["counters"])
         # drop rows written after the checkpoint: they will be recomputed identically
@@ -260,6 +314,21 @@ class TrajectoryFile:
             del self.h5["checkpoint"]
         self.h5.move("checkpoint_new", "checkpoint")
         self.h5.flush()
+        self._copy_as_last_checkpoint()
+
+    def _copy_as_last_checkpoint(self) -> None:
+        """Copy the file, consistent on disk right after a flush, to ``last_checkpoint_copy`` (through a
+        temporary file: an interrupted copy leaves the previous one).  The copy needs as much free space
+        as the file, so on a filling disk it fails first, while the file itself is still whole: the run
+        then stops at this checkpoint instead of writing on into a full disk."""
+        copy = last_checkpoint_copy(self.path)
+        tmp = copy.with_name(copy.name + ".tmp")
+        try:
+            shutil.copyfile(self.h5.filename, tmp)
+            os.replace(tmp, copy)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise TrajectoryWriteError(self.path, exc, intact=True) from exc
 
     def record_solver(self, name: str) -> None:
         """The sparse Cholesky backend of the latest invocation (results differ only by round-off)."""
@@ -273,9 +342,12 @@ class TrajectoryFile:
         self.h5.flush()
 
     def close(self) -> None:
+        """Close; a clean close leaves a consistent file, so its last-checkpoint copy goes.  If HDF5 cannot
+        write the file's last metadata (disk full), the copy stays for the resume."""
         if self.h5 is not None:
-            self.h5.close()
-            self.h5 = None
+            h5, self.h5 = self.h5, None
+            h5.close()
+            last_checkpoint_copy(self.path).unlink(missing_ok=True)
 
 
 def read_timeseries(path: str | Path) -> dict:
