@@ -2,6 +2,7 @@
 traceback; corrupt files are recognised as such and never modified; a corrupt graph cache is rebuilt."""
 
 import hashlib
+import os
 import shutil
 import subprocess
 import sys
@@ -335,3 +336,27 @@ def test_tune_with_a_bad_fixed_model_option_stops_before_the_first_trial(tmp_pat
         tmp_path,
     )
     assert_one_line_error(code, out, "tune.py: error:", "model.aggr='sum' is invalid")
+
+
+def test_a_write_finding_no_room_ends_any_entry_point_with_one_line():
+    """Disk full, quota reached or a file-size limit (ENOSPC, EDQUOT, EFBIG: what torch.save or a report
+    meets under train.py, measured with RLIMIT_FSIZE) end the program with one line saying so — also
+    when wrapped as the cause of another error; any other OSError keeps its traceback (a bug or a
+    missing file is not a full disk)."""
+    import errno
+
+    from rheograph.errors import one_line_errors
+
+    for code in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        with pytest.raises(SystemExit) as stop:
+            with one_line_errors("train.py"):
+                try:
+                    raise OSError(code, os.strerror(code), "/runs/x/fold0.pt")
+                except OSError as exc:
+                    raise RuntimeError("saving the bundle failed") from exc
+        message = str(stop.value)
+        assert message.startswith("train.py: error: no room to write /runs/x/fold0.pt"), message
+        assert "rerun the same command" in message
+    with pytest.raises(FileNotFoundError):
+        with one_line_errors("train.py"):
+            raise FileNotFoundError(errno.ENOENT, "No such file or directory", "/runs/x")

@@ -470,7 +470,7 @@ def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_
     run_dir = tmp_path / "run"
     with pytest.raises(RuntimeError, match="stopped mid-fold"):
         train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [Stop()])
-    assert (run_dir / "fold1" / "resume" / "last.ckpt").exists()
+    assert (run_dir / "fold1_resume" / "last.ckpt").exists()
     assert not (run_dir / "fold1_result.json").exists()
     epochs = Epochs()
     resumed = train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [epochs])
@@ -481,13 +481,13 @@ def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_
         np.load(tmp_path / "uninterrupted" / "fold1_predictions.npz") as b,
     ):
         np.testing.assert_array_equal(a["pred"], b["pred"])
-    assert not (run_dir / "fold1" / "resume").exists()
+    assert not (run_dir / "fold1_resume").exists()
 
     # a resume point cut short (killed while writing it) is set aside: the fold trains again from epoch 0
     run_dir = tmp_path / "cut"
     with pytest.raises(RuntimeError, match="stopped mid-fold"):
         train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [Stop()])
-    resume_point = run_dir / "fold1" / "resume" / "last.ckpt"
+    resume_point = run_dir / "fold1_resume" / "last.ckpt"
     resume_point.write_bytes(resume_point.read_bytes()[:1000])
     epochs = Epochs()
     np.testing.assert_equal(train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [epochs]), reference)

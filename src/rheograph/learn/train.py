@@ -140,7 +140,7 @@ def train_fold(
     dm.save_split(run_dir / f"fold{k}_split.json")
     # a fold killed mid-way resumes from its last finished epoch, not its first (check_resumable has
     # already refused another configuration or other data in this run directory)
-    resume_dir = run_dir / f"fold{k}" / "resume"
+    resume_dir = run_dir / f"fold{k}_resume"
     resume_point = resume_dir / "last.ckpt"
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] + list(extra_callbacks)
     resume = FoldResumePoint(resume_dir)
