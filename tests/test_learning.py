@@ -446,7 +446,8 @@ def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_
     """A fold stopped after two of its four epochs (an exception where a kill would land) resumes from
     its last finished epoch — it trains epochs 2 and 3 only — and ends bit for bit where the uninterrupted
     fold ends (weights, optimiser, schedule, best so far and torch's random draws carried over); the
-    finished fold leaves no resume state behind."""
+    finished fold leaves no resume state behind; a fold killed after early stopping had ended its
+    training (while testing) trains no further epoch when resumed."""
     from lightning.pytorch.callbacks import Callback
 
     from rheograph.learn.train import train_folds
@@ -463,9 +464,8 @@ def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_
         def on_train_epoch_start(self, trainer, module):
             self.trained.append(trainer.current_epoch)
 
-    cfg = compose_train(
-        [*quick_folds(tiny_files, tmp_path), "fold=1", "report=false", "trainer.max_epochs=4"]
-    )
+    overrides = [*quick_folds(tiny_files, tmp_path), "fold=1", "report=false", "trainer.max_epochs=4"]
+    cfg = compose_train(overrides)
     reference = train_folds(cfg, tmp_path / "uninterrupted")
     run_dir = tmp_path / "run"
     with pytest.raises(RuntimeError, match="stopped mid-fold"):
@@ -492,6 +492,22 @@ def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_
     epochs = Epochs()
     np.testing.assert_equal(train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [epochs]), reference)
     assert epochs.trained == [0, 1, 2, 3]
+
+    # killed after early stopping had ended training (while testing): the rerun trains no further epoch
+    class StopWhileTesting(Callback):
+        def on_test_start(self, trainer, module):
+            raise RuntimeError("stopped mid-fold")
+
+    cfg = compose_train([*overrides, "+callbacks.early_stopping.stopping_threshold=1e9"])  # stops at once
+    epochs = Epochs()
+    reference = train_folds(cfg, tmp_path / "early", fold_callbacks=lambda position, k: [epochs])
+    assert epochs.trained == [0]
+    run_dir = tmp_path / "early_cut"
+    with pytest.raises(RuntimeError, match="stopped mid-fold"):
+        train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [StopWhileTesting()])
+    epochs = Epochs()
+    np.testing.assert_equal(train_folds(cfg, run_dir, fold_callbacks=lambda position, k: [epochs]), reference)
+    assert epochs.trained == []
 
 
 def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):

@@ -63,6 +63,46 @@ def test_file_layout_and_snapshot_targets(tmp_path):
     assert np.isfinite(info["summary"]["viscosity"])
 
 
+def test_damage_found_after_the_file_opens_falls_back_to_the_last_checkpoint_copy(
+    tmp_path, monkeypatch, caplog
+):
+    """A file whose superblock opens but whose checkpoint cannot be read (emulated: the first read of it
+    raises KeyError, as HDF5 does for a bad object header) counts as damaged: the resume sets it aside,
+    continues from the last-checkpoint copy, and ends at the uninterrupted run; without a copy the same
+    damage is refused by name, the file closed (not left locked)."""
+    import os
+    import shutil
+
+    import rheograph.io.hdf5 as hdf5
+
+    params = SimParams(**TINY)
+    ref = tmp_path / "ref.h5"
+    run_state_point(params, ref, progress=False)
+    cut = tmp_path / "cut.h5"
+    run_state_point(params, cut, progress=False, max_steps=37)
+    read_checkpoint = hdf5._state_from_checkpoint
+    damaged_file = os.stat(cut).st_ino  # the restored file is another one (a copy moved into place)
+
+    def read_unless_damaged(group):
+        if os.stat(group.file.filename).st_ino == damaged_file:
+            raise KeyError("Unable to synchronously open object (bad object header version number)")
+        return read_checkpoint(group)
+
+    monkeypatch.setattr(hdf5, "_state_from_checkpoint", read_unless_damaged)
+    with pytest.raises(hdf5.DamagedTrajectoryError, match="cannot be read back"):
+        run_state_point(params, cut, progress=False)  # no copy (closed cleanly): refused by name
+    with h5py.File(cut, "r+"):  # and not left open by the failed attempt
+        pass
+    shutil.copyfile(cut, hdf5.last_checkpoint_copy(cut))  # what an unclean stop leaves beside it
+    with caplog.at_level("WARNING", logger="rheograph"):
+        assert run_state_point(params, cut, progress=False).status == "completed"
+    assert "resuming from its copy as of the last checkpoint" in caplog.text
+    assert (tmp_path / "cut.h5.damaged").exists() and not hdf5.last_checkpoint_copy(cut).exists()
+    a, b = read_timeseries(ref), read_timeseries(cut)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
 @pytest.mark.parametrize("lagged", [False, True])
 def test_resume_reproduces_the_uninterrupted_trajectory(tmp_path, lagged):
     params = SimParams(**TINY, lagged_step_control=lagged)

@@ -23,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
+from rheograph.errors import NO_ROOM
 from rheograph.io.hdf5 import (
     TrajectoryFile,
     TrajectoryWriteError,
@@ -132,6 +133,7 @@ def run_state_point(
     if path.exists():
         finished = finished_outcome(path, params)
         if finished is not None:
+            compress_at_rest(path)  # a no-op, unless compressing failed last time (e.g. disk full)
             return finished
     traj = TrajectoryFile(path, params)
     if path.exists():
@@ -148,6 +150,8 @@ def run_state_point(
         with _StopFlag() as stop:
             try:
                 status = loop.run(stop)
+            except OSError:
+                raise  # the file could not be written: recording that in it would fail too
             except Exception:
                 traj.finish("error", {})  # an exception (e.g. a solver failure) is recorded, then raised
                 raise
@@ -156,18 +160,18 @@ def run_state_point(
             summary = _summary(traj, params, status, sim.state.strain)
             summary["cpu_seconds"] = loop.cpu_seconds()
             traj.finish(status, summary)  # partial runs get a summary too; their status says so
-    except TrajectoryWriteError as exc:  # the file is whole; recording the failure in it may fail too
+    except OSError as exc:
+        if exc.errno is not None and exc.errno not in NO_ROOM:
+            raise  # not the trajectory's (HDF5's errors carry no errno): e.g. a closed pipe on stderr
         write_failure = exc
-    except OSError as exc:  # only the writer does I/O in the loop: HDF5 could not write (disk full)
-        write_failure = TrajectoryWriteError(path, exc)
     finally:
         loop.bar.close()
         try:
             traj.close()
         except OSError as exc:  # HDF5's last metadata did not fit either: the copy stays for the resume
-            write_failure = write_failure or TrajectoryWriteError(path, exc)
+            write_failure = write_failure or exc
     if write_failure is not None:
-        raise write_failure
+        raise TrajectoryWriteError(path, write_failure)
     if status in ("completed", "jammed"):
         compress_at_rest(path)
     if stop.signum is not None:

@@ -15,6 +15,8 @@ deterministic), so an interrupted run loses and duplicates nothing.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import logging
 import os
@@ -88,14 +90,15 @@ class DamagedTrajectoryError(TrajectoryFileError):
 
 
 class TrajectoryWriteError(InputError):
-    """Writing a trajectory failed (disk full, quota, file-size limit): the run stopped; says which copy
-    a rerun resumes from."""
+    """Writing a trajectory failed (disk full, quota, file-size limit): the run stopped; says what a rerun
+    resumes from — the file, closed cleanly, or its last-checkpoint copy where closing failed too."""
 
-    def __init__(self, path: Path, cause: OSError, intact: bool = False):
+    def __init__(self, path: Path, cause: OSError):
+        copy = last_checkpoint_copy(path)
         where = (
-            "the file is whole as of its last checkpoint"
-            if intact
-            else f"a rerun resumes from the copy as of its last checkpoint, {last_checkpoint_copy(path).name}"
+            f"a rerun resumes from the copy as of its last checkpoint, {copy.name}"
+            if copy.exists()
+            else "the file is whole as of its last checkpoint"
         )
         super().__init__(
             f"writing {path} failed ({cause}): is the disk full or a quota reached? The run stopped; "
@@ -112,6 +115,15 @@ def last_checkpoint_copy(path: str | Path) -> Path:
     cleanly."""
     path = Path(path)
     return path.with_name(path.name + ".last-checkpoint")
+
+
+def _unused_name(path: Path) -> Path:
+    """``path``, or ``path.1``, ``path.2``, ...: the first that does not exist."""
+    candidate, n = path, 0
+    while candidate.exists():
+        n += 1
+        candidate = path.with_name(f"{path.name}.{n}")
+    return candidate
 
 
 def _append(ds: h5py.Dataset, values) -> None:
@@ -197,15 +209,29 @@ class TrajectoryFile:
             copy = last_checkpoint_copy(self.path)
             if not copy.exists():
                 raise
-            damaged = self.path.with_name(self.path.name + ".damaged")
-            os.replace(self.path, damaged)
-            shutil.copyfile(copy, self.path)  # the copy stays until this invocation closes cleanly
-            log.warning(
-                "%s could not be read back (%s): resuming from its copy as of the last checkpoint "
-                "(%s); the damaged file is kept as %s (delete it once the run is through)",
-                self.path, exc, copy.name, damaged.name,
-            )  # fmt: skip
-            return self._open_existing()
+            with open(copy, "rb") as held:
+                try:  # one restorer at a time
+                    fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except OSError:
+                    raise TrajectoryFileError(
+                        f"{self.path} is being restored from {copy.name} by another process: is this state "
+                        "point already running?"
+                    ) from exc
+                try:  # restored (and opened) meanwhile by another process?
+                    return self._open_existing()
+                except DamagedTrajectoryError:
+                    pass
+                damaged = _unused_name(self.path.with_name(self.path.name + ".damaged"))
+                tmp = self.path.with_name(self.path.name + ".restoring")
+                shutil.copyfile(copy, tmp)  # the copy itself stays until this invocation closes cleanly
+                os.link(self.path, damaged)  # the file exists at every moment: damaged, then restored
+                os.replace(tmp, self.path)
+                log.warning(
+                    "%s could not be read back (%s): resuming from its copy as of the last checkpoint "
+                    "(%s); the damaged file is kept as %s (delete it once the run is through)",
+                    self.path, exc, copy.name, damaged.name,
+                )  # fmt: skip
+                return self._open_existing()
 
     def _open_existing(self) -> tuple[SimState, dict]:
         try:
@@ -226,54 +252,67 @@ class TrajectoryFile:
             raise DamagedTrajectoryError(
                 f"{self.path}: not a readable HDF5 file ({exc}); it was not modified; move it aside and rerun"
             ) from exc
-        if h5.attrs.get("producer") != PRODUCER:
-            h5.close()
-            raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
-        will_step = "checkpoint" in h5 and float(h5["checkpoint"].attrs["strain"]) < self.params.strain
-        if will_step and h5["snapshots/positions"].compression is not None:  # a finished file is extended:
-            h5.close()  # raw again before appending (see COMPRESSION)
-            rewrite(self.path, compressed=False)
-            h5 = h5py.File(self.path, "r+")
-        if "checkpoint" not in h5 and "checkpoint_new" in h5:  # interrupted between delete and move
-            h5.move("checkpoint_new", "checkpoint")
-        if "checkpoint" not in h5:
-            h5.close()
-            raise DamagedTrajectoryError(f"{self.path}: the checkpoint is missing; move the file away")
-        version = int(h5.attrs.get("schema_version", -1))
-        if version != SCHEMA_VERSION:
-            h5.close()
-            raise TrajectoryFileError(
-                f"{self.path}: schema_version {version}, this rheograph writes {SCHEMA_VERSION}"
-            )
-        stored = json.loads(h5.attrs["params"])
-        mine = self.params.to_dict()
-        differ = params_that_differ(stored, self.params)
-        if differ:
-            h5.close()
-            detail = ", ".join(f"{k}: file {stored.get(k)!r} vs requested {mine[k]!r}" for k in differ)
-            raise TrajectoryFileError(f"{self.path} belongs to another state point ({detail})")
-        cp = h5["checkpoint"]
-        if "positions" not in cp:
-            h5.close()
-            raise DamagedTrajectoryError(f"{self.path}: checkpoint is incomplete; move the file away")
-        state = _state_from_checkpoint(cp)
-        counters = json.loads(cp.attrs["counters"])
-        # drop rows written after the checkpoint: they will be recomputed identically
-        for name in TIMESERIES_SCALARS + TIMESERIES_TENSORS:
-            h5["timeseries"][name].resize(counters["rows"], axis=0)
-        sn = h5["snapshots"]
-        for name in (*SNAPSHOT_SCALARS, "positions"):
-            sn[name].resize(counters["snapshots"], axis=0)
-        sn["contact_offset"].resize(counters["snapshots"] + 1, axis=0)
-        n_contacts = int(sn["contact_offset"][-1])
-        for name in ("contact_pairs", "contact_state", "contact_stretch"):
-            sn[name].resize(n_contacts, axis=0)
-        h5.attrs["status"] = "running"
-        h5.attrs["params"] = json.dumps(mine)  # resumable parameters (strain, wall limits) may have changed
-        for key, value in mine.items():
-            h5.attrs[f"param_{key}"] = value
-        self.h5 = h5
-        return state, counters
+        try:
+            return self._resume_from(h5)
+        except TrajectoryFileError:
+            raise
+        except (OSError, KeyError, RuntimeError, ValueError) as exc:  # metadata damaged past the superblock
+            raise DamagedTrajectoryError(
+                f"{self.path} cannot be read back ({exc}); move it aside and rerun"
+            ) from exc
+
+    def _resume_from(self, h5: h5py.File) -> tuple[SimState, dict]:
+        """Check an opened file and set it up to continue from its checkpoint; closed on any failure."""
+        try:
+            if h5.attrs.get("producer") != PRODUCER:
+                raise TrajectoryFileError(f"{self.path}: not a rheograph trajectory file; move it away")
+            will_step = "checkpoint" in h5 and float(h5["checkpoint"].attrs["strain"]) < self.params.strain
+            if will_step and h5["snapshots/positions"].compression is not None:
+                h5.close()  # a finished file is extended: raw again before appending (see COMPRESSION)
+                rewrite(self.path, compressed=False)
+                h5 = h5py.File(self.path, "r+")
+            if "checkpoint" not in h5 and "checkpoint_new" in h5:  # interrupted between delete and move
+                h5.move("checkpoint_new", "checkpoint")
+            if "checkpoint" not in h5:
+                raise DamagedTrajectoryError(f"{self.path}: the checkpoint is missing; move the file away")
+            version = int(h5.attrs.get("schema_version", -1))
+            if version != SCHEMA_VERSION:
+                raise TrajectoryFileError(
+                    f"{self.path}: schema_version {version}, this rheograph writes {SCHEMA_VERSION}"
+                )
+            stored = json.loads(h5.attrs["params"])
+            mine = self.params.to_dict()
+            differ = params_that_differ(stored, self.params)
+            if differ:
+                detail = ", ".join(f"{k}: file {stored.get(k)!r} vs requested {mine[k]!r}" for k in differ)
+                raise TrajectoryFileError(f"{self.path} belongs to another state point ({detail})")
+            cp = h5["checkpoint"]
+            if "positions" not in cp:
+                raise DamagedTrajectoryError(f"{self.path}: checkpoint is incomplete; move the file away")
+            state = _state_from_checkpoint(cp)
+            counters = json.loads(cp.attrs["counters"])
+            # drop rows written after the checkpoint: they will be recomputed identically
+            for name in TIMESERIES_SCALARS + TIMESERIES_TENSORS:
+                h5["timeseries"][name].resize(counters["rows"], axis=0)
+            sn = h5["snapshots"]
+            for name in (*SNAPSHOT_SCALARS, "positions"):
+                sn[name].resize(counters["snapshots"], axis=0)
+            sn["contact_offset"].resize(counters["snapshots"] + 1, axis=0)
+            n_contacts = int(sn["contact_offset"][-1])
+            for name in ("contact_pairs", "contact_state", "contact_stretch"):
+                sn[name].resize(n_contacts, axis=0)
+            h5.attrs["status"] = "running"
+            h5.attrs["params"] = json.dumps(
+                mine
+            )  # resumable parameters (strain, wall limits) may have changed
+            for key, value in mine.items():
+                h5.attrs[f"param_{key}"] = value
+            self.h5 = h5
+            return state, counters
+        except BaseException:
+            with contextlib.suppress(Exception):
+                h5.close()
+            raise
 
     # ---- writing ------------------------------------------------------------------------------
     def append_row(self, row: dict) -> None:
@@ -326,9 +365,9 @@ class TrajectoryFile:
         try:
             shutil.copyfile(self.h5.filename, tmp)
             os.replace(tmp, copy)
-        except OSError as exc:
+        except OSError:
             tmp.unlink(missing_ok=True)
-            raise TrajectoryWriteError(self.path, exc, intact=True) from exc
+            raise
 
     def record_solver(self, name: str) -> None:
         """The sparse Cholesky backend of the latest invocation (results differ only by round-off)."""

@@ -131,21 +131,37 @@ def _spread(values: torch.Tensor) -> torch.Tensor:
 
 class FoldResumePoint(L.pytorch.callbacks.ModelCheckpoint):
     """Saves a fold's whole training state after every epoch as ``<dirpath>/last.ckpt`` (weights,
-    optimiser, schedule, early stopping, best so far) and with it torch's global random generator — the
-    only one training draws from (shuffles, dropout; numpy draws are seeded generators) —, so that a fold
-    resumed from it ends where the uninterrupted fold would have."""
+    optimiser, schedule, early stopping, best so far), with torch's global random generator — the only
+    one training draws from on the CPU (shuffles, dropout; numpy draws are seeded generators) — and
+    whether training had decided to stop, so that a fold resumed from it ends where the uninterrupted
+    fold would have (bit for bit on the CPU in one process; CUDA generators and DDP ranks' own draws are
+    not carried: such a fold resumes from its last epoch, not bit for bit)."""
 
     def __init__(self, dirpath):
         # no monitor: the one kept checkpoint is the latest epoch's, always under the same name
         super().__init__(dirpath=dirpath, filename="last", save_top_k=1, enable_version_counter=False)
+        self._trainer = None
+        self._stopped = False
+
+    def setup(self, trainer, pl_module, stage: str) -> None:
+        super().setup(trainer, pl_module, stage)
+        self._trainer = trainer
 
     def state_dict(self) -> dict:
-        return {**super().state_dict(), "torch_random_state": torch.get_rng_state()}
+        # saved after early stopping's verdict on the epoch (Lightning runs checkpoint callbacks last)
+        stopped = bool(self._trainer is not None and self._trainer.should_stop)
+        return {**super().state_dict(), "torch_random_state": torch.get_rng_state(), "stopped": stopped}
 
     def load_state_dict(self, state_dict: dict) -> None:
         state = dict(state_dict)
         torch.set_rng_state(state.pop("torch_random_state"))
+        self._stopped = state.pop("stopped")
         super().load_state_dict(state)
+
+    def on_train_start(self, trainer, pl_module) -> None:
+        super().on_train_start(trainer, pl_module)
+        if self._stopped:  # killed after training had ended (testing, saving): train no further epoch
+            trainer.should_stop = True
 
 
 class SurrogateModule(L.LightningModule):

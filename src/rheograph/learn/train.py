@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import logging
 import os
@@ -78,6 +79,7 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
     ``domain`` records what the model was trained on (phi and sigma ranges, N, size ratio, edge-feature
     ranges) so that predictions outside it are flagged."""
     hp = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(module.hparams).items()}
+    buffer = io.BytesIO()
     torch.save(
         {
             "format": BUNDLE_FORMAT,
@@ -92,8 +94,16 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
             "split": split,
             "domain": domain,
         },
-        path,
+        buffer,
     )
+    # written by Python, not torch's writer: a full disk raises OSError (ENOSPC, one line at the entry
+    # points) instead of torch's errno-less RuntimeError; through a temporary file, so a bundle is whole
+    tmp = Path(path).with_name(Path(path).name + ".tmp")
+    try:
+        tmp.write_bytes(buffer.getvalue())
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):

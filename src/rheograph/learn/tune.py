@@ -17,6 +17,7 @@ experiment config.
 from __future__ import annotations
 
 import logging
+import shutil
 import warnings
 from pathlib import Path
 
@@ -106,7 +107,12 @@ def make_objective(cfg: DictConfig, run_root: Path):
             reporters.append(EpochReporter(trial, metric, first_step=position * epochs))
             return [reporters[-1]]
 
-        summary = train_folds(train_cfg, run_root / f"trial_{trial.number:04d}", fold_callbacks)
+        trial_dir = run_root / f"trial_{trial.number:04d}"
+        try:
+            summary = train_folds(train_cfg, trial_dir, fold_callbacks)
+        finally:  # a pruned, failed or killed trial is retried under a new number: its resume state is dead
+            for resume_dir in trial_dir.glob("fold*_resume"):
+                shutil.rmtree(resume_dir, ignore_errors=True)
         for key, value in summary.items():
             trial.set_user_attr(key, value)
         value = float(np.mean([r.best for r in reporters]))
