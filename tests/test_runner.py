@@ -277,7 +277,8 @@ def test_a_run_respaced_and_extended_equals_a_run_at_the_coarser_spacing_from_th
 def test_rewrite_refuses_bad_snapshot_selections_and_leaves_no_half_file(tmp_path):
     """``rewrite(keep_snapshots=…)`` takes strictly ascending indices below the checkpoint's count and sets
     that count to the kept one (a resume then continues after them); an edit that fails, like an
-    interruption, leaves the original file and no temporary file."""
+    interruption or a full disk (then named in one line), leaves the original file and no temporary
+    file."""
     from rheograph.errors import InputError
     from rheograph.io.hdf5 import rewrite
 
@@ -294,6 +295,13 @@ def test_rewrite_refuses_bad_snapshot_selections_and_leaves_no_half_file(tmp_pat
 
     with pytest.raises(KeyboardInterrupt):
         rewrite(path, keep_snapshots=[0, 2], edit=failing_edit)
+    assert path.read_bytes() == untouched and not list(tmp_path.glob("*.tmp"))
+
+    def full_disk(h5):
+        raise OSError("File write failed")  # as h5py reports it: no errno
+
+    with pytest.raises(InputError, match=r"is the disk full or a quota reached\? .*run.h5 is unchanged"):
+        rewrite(path, keep_snapshots=[0, 2], edit=full_disk)
     assert path.read_bytes() == untouched and not list(tmp_path.glob("*.tmp"))
     rewrite(path, keep_snapshots=[0, 2])
     with h5py.File(path) as h5:
