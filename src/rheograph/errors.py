@@ -10,6 +10,13 @@ from contextlib import contextmanager
 NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)  # disk full, quota reached, file-size limit
 
 
+def hdf5_write_found_no_room(exc: OSError) -> bool:
+    """Whether an OSError raised while writing an HDF5 file is a write that found no room: h5py's write
+    errors carry no errno (their message is HDF5's), the operating system's say ENOSPC / EDQUOT / EFBIG;
+    any other errno (a closed pipe, a missing file) is something else."""
+    return exc.errno is None or exc.errno in NO_ROOM
+
+
 class InputError(ValueError):
     """Bad input from the user (configuration, command line or file)."""
 

@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rheograph.analysis import steady_state_summary
-from rheograph.errors import NO_ROOM
+from rheograph.errors import hdf5_write_found_no_room
 from rheograph.io.hdf5 import (
     TrajectoryFile,
     TrajectoryWriteError,
@@ -161,8 +161,8 @@ def run_state_point(
             summary["cpu_seconds"] = loop.cpu_seconds()
             traj.finish(status, summary)  # partial runs get a summary too; their status says so
     except OSError as exc:
-        if exc.errno is not None and exc.errno not in NO_ROOM:
-            raise  # not the trajectory's (HDF5's errors carry no errno): e.g. a closed pipe on stderr
+        if not hdf5_write_found_no_room(exc):
+            raise  # not the trajectory's: e.g. a closed pipe on stderr
         write_failure = exc
     finally:
         loop.bar.close()

@@ -26,7 +26,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rheograph.errors import NO_ROOM, InputError
+from rheograph.errors import InputError, hdf5_write_found_no_room
 from rheograph.sim.integrator import SimState
 from rheograph.sim.params import SimParams
 
@@ -534,9 +534,9 @@ def rewrite(path: str | Path, compressed: bool = True, keep_snapshots=None, edit
                     edit(dst)
             with open(tmp, "rb+") as handle:  # on disk before the swap: a crash keeps one whole file
                 os.fsync(handle.fileno())
-        except OSError as exc:  # h5py's write errors carry no errno: a full disk, a quota
+        except OSError as exc:
             tmp.unlink(missing_ok=True)
-            if exc.errno is not None and exc.errno not in NO_ROOM:
+            if not hdf5_write_found_no_room(exc):
                 raise
             raise InputError(
                 f"rewriting {path} failed ({exc}): is the disk full or a quota reached? {path} is "
