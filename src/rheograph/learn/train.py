@@ -144,6 +144,7 @@ def train_fold(
     """Train, test and save fold ``k``; returns (result row, test predictions with baselines).
     ``extra_callbacks`` join the configured Lightning callbacks (the search's per-epoch pruning)."""
     import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
 
     L.seed_everything(int(cfg.seed) + k, workers=True)
     dm, module = setup_fold(cfg, k, settings)
@@ -153,10 +154,15 @@ def train_fold(
     resume_dir = run_dir / f"fold{k}_resume"
     resume_point = resume_dir / "last.ckpt"
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] + list(extra_callbacks)
+    for callback in callbacks:
+        # the best-so-far weights are scratch of an unfinished fold (fold<k>.pt keeps them once it
+        # finishes): beside the resume point and removed with it, not left in the run or TensorBoard folder
+        if isinstance(callback, ModelCheckpoint) and callback.dirpath is None:
+            callback.dirpath = str((resume_dir / "best").resolve())
     resume = FoldResumePoint(resume_dir)
     logger = instantiate(cfg.logger, version=f"fold{k}") if cfg.get("logger") else False
     trainer = instantiate(
-        cfg.trainer, callbacks=[*callbacks, resume], logger=logger, default_root_dir=str(run_dir / f"fold{k}")
+        cfg.trainer, callbacks=[*callbacks, resume], logger=logger, default_root_dir=str(resume_dir)
     )
     if resume_point.exists() and not _readable_checkpoint(resume_point):
         log.warning(
