@@ -3,6 +3,8 @@ of range, a file that is not what it should be, a glob that matches nothing.  It
 value or file and what to do; entry points print it as one line and exit non-zero (``one_line_errors``)."""
 
 import errno
+import logging
+import multiprocessing
 import os
 import sys
 from contextlib import contextmanager
@@ -21,6 +23,11 @@ class InputError(ValueError):
     """Bad input from the user (configuration, command line or file)."""
 
 
+class NoRoomError(InputError):
+    """A write that found no room (disk full, quota, file-size limit), reported with what a rerun resumes
+    from."""
+
+
 class OtherRunError(InputError):
     """A training run directory that holds folds of another configuration or of other data: resuming
     into it would mix them."""
@@ -34,13 +41,39 @@ def _no_room_message(exc: OSError) -> str:
     )
 
 
+# h5py's report of an object it cannot release from a file whose writes failed (from its deallocator)
+_RELEASE_FAILURE = "Can't decrement id ref count (file write failed"
+
+
+@contextmanager
+def _without_release_failure_reports():
+    """Drops h5py's tracebacks for objects it cannot release from a file whose writes failed — one per
+    open dataset, printed before the line that says what failed and what to do — and nothing else."""
+    unraisablehook, excepthook = sys.unraisablehook, sys.excepthook
+
+    def on_unraisable(info):
+        if not str(info.exc_value).startswith(_RELEASE_FAILURE):
+            unraisablehook(info)
+
+    def on_exception(kind, value, traceback):
+        if not str(value).startswith(_RELEASE_FAILURE):
+            excepthook(kind, value, traceback)
+
+    sys.unraisablehook, sys.excepthook = on_unraisable, on_exception
+    try:
+        yield
+    finally:
+        sys.unraisablehook, sys.excepthook = unraisablehook, excepthook
+
+
 @contextmanager
 def one_line_errors(program: str):
     """Bad input (``InputError``, also when Hydra's instantiate wraps it) and a write that found no room
-    (disk full, quota: ``NO_ROOM``) end the program with one line naming the problem and a non-zero
-    status; ``HYDRA_FULL_ERROR=1`` or ``RHEOGRAPH_DEBUG=1`` re-raises it with its traceback."""
+    (disk full, quota: ``NO_ROOM``, ``NoRoomError``) end the program with one line naming the problem and a
+    non-zero status; ``HYDRA_FULL_ERROR=1`` or ``RHEOGRAPH_DEBUG=1`` re-raises it with its traceback."""
     try:
-        yield
+        with _without_release_failure_reports():
+            yield
     except Exception as exc:
         cause = exc
         while cause is not None and not (
@@ -49,4 +82,13 @@ def one_line_errors(program: str):
             cause = cause.__cause__
         if cause is None or os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("RHEOGRAPH_DEBUG"):
             raise
-        sys.exit(f"{program}: error: {cause if isinstance(cause, InputError) else _no_room_message(cause)}")
+        message = f"{program}: error: {cause if isinstance(cause, InputError) else _no_room_message(cause)}"
+        in_main_process = multiprocessing.current_process().name == "MainProcess"
+        if isinstance(cause, (NoRoomError, OSError)) and in_main_process:
+            # the HDF5 library, at interpreter exit, flushes a file whose writes failed once more and can
+            # crash doing so (SIGSEGV, measured under a file-size limit): the error must stay the last word
+            print(message, file=sys.stderr, flush=True)
+            logging.shutdown()
+            sys.stdout.flush()
+            os._exit(1)
+        sys.exit(message)

@@ -26,7 +26,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rheograph.errors import InputError, hdf5_write_found_no_room
+from rheograph.errors import InputError, NoRoomError, hdf5_write_found_no_room
 from rheograph.sim.integrator import SimState
 from rheograph.sim.params import SimParams
 
@@ -89,7 +89,7 @@ class DamagedTrajectoryError(TrajectoryFileError):
     """A trajectory file that cannot be read back (truncated, half-written metadata, checkpoint missing)."""
 
 
-class TrajectoryWriteError(InputError):
+class TrajectoryWriteError(NoRoomError):
     """Writing a trajectory failed (disk full, quota, file-size limit): the run stopped; says what a rerun
     resumes from — the file, closed cleanly, or its last-checkpoint copy where closing failed too."""
 
