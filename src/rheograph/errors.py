@@ -24,8 +24,8 @@ class InputError(ValueError):
 
 
 class NoRoomError(InputError):
-    """A write that found no room (disk full, quota, file-size limit), reported with what a rerun resumes
-    from."""
+    """An HDF5 file whose writes found no room (disk full, quota, file-size limit), reported with what a
+    rerun resumes from; the library may still hold the file open."""
 
 
 class OtherRunError(InputError):
@@ -69,8 +69,9 @@ def _without_release_failure_reports():
 @contextmanager
 def one_line_errors(program: str):
     """Bad input (``InputError``, also when Hydra's instantiate wraps it) and a write that found no room
-    (disk full, quota: ``NO_ROOM``, ``NoRoomError``) end the program with one line naming the problem and a
-    non-zero status; ``HYDRA_FULL_ERROR=1`` or ``RHEOGRAPH_DEBUG=1`` re-raises it with its traceback."""
+    (disk full, quota: ``NO_ROOM``; ``NoRoomError`` for a trajectory) end the program with one line
+    naming the problem and a non-zero status; ``HYDRA_FULL_ERROR=1`` or ``RHEOGRAPH_DEBUG=1`` re-raises it
+    with its traceback."""
     try:
         with _without_release_failure_reports():
             yield
@@ -84,9 +85,10 @@ def one_line_errors(program: str):
             raise
         message = f"{program}: error: {cause if isinstance(cause, InputError) else _no_room_message(cause)}"
         in_main_process = multiprocessing.current_process().name == "MainProcess"
-        if isinstance(cause, (NoRoomError, OSError)) and in_main_process:
-            # the HDF5 library, at interpreter exit, flushes a file whose writes failed once more and can
-            # crash doing so (SIGSEGV, measured under a file-size limit): the error must stay the last word
+        if isinstance(cause, NoRoomError) and in_main_process:
+            # the HDF5 library, at interpreter exit, flushes the trajectory whose writes failed once
+            # more and can crash doing so (SIGSEGV, measured under a file-size limit): the error stays
+            # the last word
             print(message, file=sys.stderr, flush=True)
             logging.shutdown()
             sys.stdout.flush()
