@@ -30,9 +30,10 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 
 from rheograph.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
+from rheograph.io.snapshots import read_snapshots  # noqa: E402
 from rheograph.learn.error_model import error_scale  # noqa: E402
 from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
-from rheograph.learn.predict import predict_file  # noqa: E402
+from rheograph.learn.predict import Surrogate  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import publish  # noqa: E402
@@ -68,7 +69,7 @@ def main(argv=None) -> None:
     preds, stds, errs, trues, seconds, n_snapshots, sim_cost = [], [], [], [], 0.0, 0, []
     for path in test_files:
         t0 = time.perf_counter()
-        result = predict_file(bundles, path)
+        result = Surrogate(bundles, str(run_dir)).predict_snapshots(read_snapshots(path))
         seconds += time.perf_counter() - t0
         n_snapshots += result["strain"].size
         steady = result["strain"] >= 1.0  # scored like the training data: after the start-up transient

@@ -83,17 +83,14 @@ def test_train_on_a_truncated_trajectory_says_so_and_leaves_it_alone(tmp_path, t
 
 
 def test_predict_on_a_file_that_is_not_hdf5(tmp_path):
-    """With a real model bundle (a committed one), the input file itself is what is refused, by name."""
+    """With a real model (a shipped one), the input file itself is what is refused, by name."""
     garbage = tmp_path / "notes.h5"
     garbage.write_text("this is not a trajectory")
-    bundle_dir = tmp_path / "models"
-    bundle_dir.mkdir()
-    shutil.copy(ROOT / "docs" / "results" / "surrogate_uncertainty" / "fold0.pt", bundle_dir / "fold0.pt")
     code, out = run(
-        [str(ROOT / "predict.py"), "--models", str(bundle_dir), "--input", str(garbage), "--out", "x.csv"],
+        [str(ROOT / "predict.py"), "--models", "N400_phi0.76", "--input", str(garbage), "--out", "x.csv"],
         tmp_path,
     )
-    assert_one_line_error(code, out, "predict.py: error:", "notes.h5", "not a readable rheograph trajectory")
+    assert_one_line_error(code, out, "predict.py: error:", "notes.h5", "not a snapshot source")
     assert garbage.read_text() == "this is not a trajectory"
     assert not (tmp_path / "x.csv").exists()
 

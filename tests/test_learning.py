@@ -15,6 +15,7 @@ from torch_geometric.data import Batch
 
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset, snapshot_graphs
 from rheograph.graphs.features import forward_transform, inverse_transform, snapshot_edges
+from rheograph.io.snapshots import read_snapshots
 from rheograph.learn.datamodule import SnapshotDataModule, kfold_assignment
 from rheograph.learn.model import ResGCN
 from rheograph.sim.geometry import minimum_image, pair_geometry
@@ -282,7 +283,7 @@ def test_load_feature_reproduces_the_simulators_frictional_contacts(tiny_files):
 
 def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     from rheograph.errors import InputError
-    from rheograph.learn.predict import predict_file
+    from rheograph.learn.predict import load_model
     from rheograph.learn.train import train_folds
 
     pattern = str(Path(tiny_files[0]).parent / "*.h5")
@@ -321,7 +322,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     assert (run_dir / "report.md").exists() and (run_dir / "parity.png").exists()
     # checkpoint -> predict round trip: the bundle reproduces the in-training test predictions
     saved = np.load(run_dir / "test_predictions.npz")
-    result = predict_file([run_dir / "fold0.pt"], tiny_files[2])
+    result = load_model(run_dir / "fold0.pt").predict_snapshots(read_snapshots(tiny_files[2]))
     split = json.loads((run_dir / "fold0_split.json").read_text())
     assert split["test"]
     # no tiny run jammed: the jam rule says flowing everywhere and is right on every held-out trajectory
@@ -348,7 +349,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     write_error_model(
         run_dir, fit_error_model(saved["pred"], saved["true"], saved["stress"], saved["phi"], min_count=1)
     )
-    with_bars = predict_file([run_dir / "fold0.pt"], tiny_files[2])
+    with_bars = load_model(run_dir / "fold0.pt").predict_snapshots(read_snapshots(tiny_files[2]))
     expected = predicted_error(
         fit_error_model(saved["pred"], saved["true"], saved["stress"], saved["phi"], min_count=1),
         with_bars["stress"],
@@ -366,7 +367,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     run_state_point(
         SimParams(n_particles=64, phi=0.76, stress=400.0, strain=0.1, snapshot_interval=0.05), outside, False
     )
-    far = predict_file([run_dir / "fold0.pt"], outside)
+    far = load_model(run_dir / "fold0.pt").predict_snapshots(read_snapshots(outside))
     assert not far["in_domain"].any() and np.all(np.isfinite(far["eta_pred"]))
     # another size ratio cannot be encoded by the one-hot radius input: refused
     other = tmp_path / "ratio.h5"
@@ -376,7 +377,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
         False,
     )
     with pytest.raises(InputError, match="size ratio"):
-        predict_file([run_dir / "fold0.pt"], other)
+        load_model(run_dir / "fold0.pt").predict_snapshots(read_snapshots(other))
 
 
 def test_bundle_loading_refuses_foreign_files(tmp_path):

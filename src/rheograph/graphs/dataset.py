@@ -10,12 +10,10 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import h5py
 import numpy as np
 import torch
 from torch_geometric.data import Data, InMemoryDataset
 
-from rheograph.analysis import jammed_snapshots
 from rheograph.errors import InputError
 from rheograph.graphs.features import (
     COMPUTED_GRAPH_INPUTS,
@@ -29,10 +27,13 @@ from rheograph.graphs.features import (
     snapshot_edges,
     solve_viscosity,
 )
-from rheograph.io.hdf5 import PRODUCER, SCHEMA_VERSION
-from rheograph.sim.params import SimParams
+from rheograph.io.hdf5 import SCHEMA_VERSION
+from rheograph.io.snapshots import Snapshots, read_snapshots
 
 TARGETS = ("viscosity", "pressure", "z_mu")
+# the step settings of the one-solve input (rheograph.graphs.features.solve_viscosity): numerics of the
+# model, recorded in its bundle, not of the snapshot
+SOLVE_NUMERICS = ("disp_max", "dt_max", "lagged_step_control")
 log = logging.getLogger("rheograph.graphs")
 
 
@@ -109,81 +110,98 @@ class GraphSettings:
         )
 
 
-def snapshot_graphs(path: str | Path, settings: GraphSettings, run_id: int) -> list[Data]:
-    """Graphs of every snapshot (strain >= min_strain, finite targets) of one trajectory file."""
-    try:
-        h5 = h5py.File(path, "r")
-    except OSError as exc:
+def snapshot_graphs(
+    source, settings: GraphSettings, run_id: int, solve_numerics: dict | None = None, training: bool = True
+) -> list[Data]:
+    """Graphs of the snapshots of one source (a path of any kind ``rheograph.io.snapshots`` reads, or a
+    ``Snapshots``).
+
+    ``training``: only snapshots with strain >= ``settings.min_strain`` (or arrested) and finite targets,
+    as a training set needs; otherwise every snapshot, targets NaN where unknown (prediction).
+    ``solve_numerics``: the step settings of the one-solve input (``disp_max``, ``dt_max``,
+    ``lagged_step_control``) — a model's own, from its bundle; None takes the source's (how the training
+    graphs of its simulation are built)."""
+    snaps = source if isinstance(source, Snapshots) else read_snapshots(source)
+    path = snaps.source
+    params = snaps.graph_params()
+    needed = [
+        k
+        for k in ("delta", "kn_coefficient", "kt_ratio", "mu", "lub_max_gap", "size_ratio")
+        if k not in params
+    ]
+    if needed:
         raise InputError(
-            f"{path}: cannot be opened as HDF5 ({exc}); if a simulation is still writing it, wait or train "
-            "on a sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun "
-            "that state point"
-        ) from exc
-    with h5:
-        if h5.attrs.get("producer") != PRODUCER or int(h5.attrs.get("schema_version", -1)) != SCHEMA_VERSION:
-            raise InputError(f"{path}: not a rheograph trajectory of schema {SCHEMA_VERSION}")
-        params = json.loads(h5.attrs["params"])
-        status = str(h5.attrs.get("status", ""))
-        lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
-        radii = h5["radii"][()]
-        sn = h5["snapshots"]
-        strain = sn["strain"][()]
-        raw = np.stack([sn["viscosity"][()], sn["pressure"][()], sn["z_mu"][()]], axis=1)
-        offsets = sn["le_offset"][()]
-        jammed = jammed_snapshots(
-            status, strain, h5["timeseries/strain"][()], params.get("jam_intervals", SimParams.jam_intervals)
+            f"{path}: its physical parameter(s) {needed} are not given; graph features depend on them "
+            "(name them as the sim.* keys in the file, or pass LF_DEM's parameter file)"
         )
+    numerics = solve_numerics if solve_numerics is not None else snaps.numerics
+    # the physics-only row needs the solve too, but a source without a step only loses that row
+    if "solve_viscosity" in settings.graph_inputs and "disp_max" not in numerics:
+        raise InputError(
+            f"{path}: the one-solve input (solve_viscosity) needs the step disp_max, which this source does "
+            "not record: add disp_max to the file"
+        )
+    finite = np.isfinite(snaps.targets).all(axis=1)
+    if training:
+        strain = np.nan_to_num(snaps.strain, nan=-np.inf)
         # an arrested packing is a state of its own, not a start-up transient: kept at any strain
-        keep = np.flatnonzero(((strain >= settings.min_strain) | jammed) & np.isfinite(raw).all(axis=1))
-        positions = sn["positions"][keep] if keep.size else np.empty((0, radii.size, 2))
-        contacts = [None] * keep.size
-        if set(settings.edge_features) & set(HISTORY_EDGE_FEATURES):
-            if "contact_pairs" not in sn:
-                raise InputError(
-                    f"{path}: graph.edge_features has history features {list(HISTORY_EDGE_FEATURES)}, "
-                    "which need the contact states a rheograph trajectory records per snapshot; this "
-                    "file has none: use features computed from positions"
-                )
-            offset, pairs, states = sn["contact_offset"][()], sn["contact_pairs"][()], sn["contact_state"][()]
-            stretches = sn["contact_stretch"][()]
-            contacts = [
-                (
-                    pairs[offset[k] : offset[k + 1]],
-                    states[offset[k] : offset[k + 1]],
-                    stretches[offset[k] : offset[k + 1]],
-                )
-                for k in keep
-            ]
+        keep = np.flatnonzero(((strain >= settings.min_strain) | snaps.jammed) & finite)
+    else:
+        keep = np.arange(len(snaps))
+    contacts = [None] * keep.size
+    if set(settings.edge_features) & set(HISTORY_EDGE_FEATURES):
+        if snaps.contacts is None:
+            raise InputError(
+                f"{path}: graph.edge_features has history features {list(HISTORY_EDGE_FEATURES)}, "
+                "which need the contact states a rheograph trajectory records per snapshot; this "
+                "source has none: use features computed from positions"
+            )
+        contacts = [snaps.contacts[k] for k in keep]
+    lx, ly, radii = snaps.lx, snaps.ly, snaps.radii
     check_edge_reach(lx, ly, radii, settings.cutoff, path)
     x = torch.from_numpy(node_features(radii, params["size_ratio"]))
-    known = {"log_stress": np.log(params["stress"]), "phi": params["phi"]}
+    known = {"log_stress": np.log(snaps.stress), "phi": snaps.phi}
+    solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
+    solve = "disp_max" in solve_params
     graphs = []
     for k, idx in enumerate(keep):
-        if "solve_viscosity" in settings.graph_inputs:  # one resistance solve per snapshot
-            eta = solve_viscosity(positions[k], radii, lx, ly, offsets[idx], params)
-            known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
+        positions = snaps.positions[idx]
+        # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
+        eta = (
+            solve_viscosity(positions, radii, lx, ly, snaps.le_offset[idx], solve_params) if solve else np.nan
+        )
+        known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
         edge_index, feats, pairs = snapshot_edges(
-            positions[k], radii, lx, ly, offsets[idx], settings.cutoff, params, contacts[k]
+            positions, radii, lx, ly, snaps.le_offset[idx], settings.cutoff, params, contacts[k]
         )
         known["frictional_coordination"] = 2.0 * feats["frictional"][: pairs["i"].size].sum() / radii.size
+        descriptors = snapshot_descriptors(pairs, radii.size, lx * ly)
+        # the physics-only estimates (rheograph.learn.baselines.physics_rows): the one-solve eta_r, the
+        # contact-spring pressure (2 pi sigma / A) sum r a_bar overlap [sigma0] (overlap in delta_sigma),
+        # and the counted frictional contacts
+        physics = [eta, 2.0 * np.pi * snaps.stress * descriptors[3], known["frictional_coordination"]]
         u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
         edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
-        y = settings.transform_targets(*raw[idx])
+        raw = snaps.targets[idx]
+        y = settings.transform_targets(*raw)
         graphs.append(
             Data(
                 x=x,
+                pos=torch.from_numpy(positions).float(),
+                box=torch.tensor([[lx, ly, snaps.le_offset[idx]]], dtype=torch.float64),
                 edge_index=torch.from_numpy(edge_index).long(),
                 edge_attr=torch.from_numpy(edge_attr).float(),
                 y=torch.from_numpy(y).float().view(1, 3),
-                y_raw=torch.from_numpy(raw[idx]).double().view(1, 3),
+                y_raw=torch.from_numpy(raw).double().view(1, 3),
                 u=u,
                 area=torch.tensor([lx * ly], dtype=torch.float32),
-                descriptors=torch.from_numpy(snapshot_descriptors(pairs, radii.size, lx * ly)).view(1, -1),
+                descriptors=torch.from_numpy(descriptors).view(1, -1),
+                physics=torch.tensor([physics], dtype=torch.float64),
                 n_particles=torch.tensor([radii.size]),
-                jammed=torch.tensor([bool(jammed[idx])]),
-                phi=torch.tensor([params["phi"]], dtype=torch.float64),
-                stress=torch.tensor([params["stress"]], dtype=torch.float64),
-                strain=torch.tensor([strain[idx]], dtype=torch.float64),
+                jammed=torch.tensor([bool(snaps.jammed[idx])]),
+                phi=torch.tensor([snaps.phi], dtype=torch.float64),
+                stress=torch.tensor([snaps.stress], dtype=torch.float64),
+                strain=torch.tensor([snaps.strain[idx]], dtype=torch.float64),
                 run_id=torch.tensor([run_id]),
             )
         )
@@ -214,8 +232,9 @@ class SnapshotGraphDataset(InMemoryDataset):
     ``files.json`` beside it lists the files in run_id order, for a person looking into the cache.
     """
 
-    def __init__(self, files, settings: GraphSettings, cache_dir: str | Path):
+    def __init__(self, files, settings: GraphSettings, cache_dir: str | Path, lfdem_params=None):
         self.files = sorted(str(f) for f in files)
+        self.lfdem_params = None if lfdem_params is None else str(lfdem_params)
         if not self.files:
             raise InputError("no trajectory files given to the graph dataset")
         self.settings = settings
@@ -228,10 +247,12 @@ class SnapshotGraphDataset(InMemoryDataset):
                     if k not in ("pressure_per_stress", "z_mu_on_count", "viscosity_on_solve")
                 },
                 "files": _files_fingerprint(self.files),
+                **({"lfdem_params": _files_fingerprint([self.lfdem_params])} if self.lfdem_params else {}),
                 "schema": SCHEMA_VERSION,
                 # 3: jammed per snapshot (after the flow stopped), kept at any strain; 4: from the first row
-                # of the jam detector's window on (one row earlier than 3)
-                "version": 4,
+                # of the jam detector's window on (one row earlier than 3); 5: positions and box in each
+                # graph, any snapshot source
+                "version": 5,
             },
             sort_keys=True,
             default=list,
@@ -260,7 +281,7 @@ class SnapshotGraphDataset(InMemoryDataset):
     def process(self):
         graphs = []
         for run_id, path in enumerate(self.files):
-            graphs.extend(snapshot_graphs(path, self.settings, run_id))
+            graphs.extend(snapshot_graphs(read_snapshots(path, self.lfdem_params), self.settings, run_id))
         if not graphs:
             raise InputError(f"no snapshots with strain >= {self.settings.min_strain} in {self.files}")
         self.save(graphs, self.processed_paths[0])

@@ -416,8 +416,13 @@ def data_fingerprint(paths) -> str:
     change the step count)."""
     import hashlib
 
+    from rheograph.io.snapshots import source_kind
+
     identities = []
     for path in paths:
+        if source_kind(path) != "rheograph":  # a bare file or an LF_DEM run: what it holds is its bytes
+            identities.append(hashlib.sha1(Path(path).read_bytes()).hexdigest())
+            continue
         try:
             info = read_run_info(path)
         except (OSError, KeyError) as exc:

@@ -10,6 +10,10 @@
   message passing.
 * ``descriptors_ridge``: ridge regression on the descriptors alone (positions only, the seed paper's
   information).
+* physics only, nothing learned but one number per state point (``physics_rows``): ``physics_solve``,
+  the one-solve η_r, the contact-spring pressure and the counted frictional contacts (parameter-free);
+  ``physics_offset``, the same with the one-solve η_r shifted by the mean log offset of the training
+  snapshots at the same (φ, σ).
 
 All fit the transformed targets (asinh eta_r, asinh Pi, Z_mu) and return physical (G, 3) predictions.
 """
@@ -87,7 +91,29 @@ def baseline_predictions(train: dict, test: dict, viscosity_scale: float, pressu
     }
     if "computed_inputs" in train:
         raw["descriptors_solve"] = descriptor_trees(train, test, with_solve=True)
-    return {name: physical_targets(pred, viscosity_scale, pressure_scale) for name, pred in raw.items()}
+    out = {name: physical_targets(pred, viscosity_scale, pressure_scale) for name, pred in raw.items()}
+    if np.isfinite(test["physics"][:, 0]).all():  # every snapshot had its solve
+        out.update(physics_rows(train, test, viscosity_scale))
+    return out
+
+
+def physics_rows(train: dict, test: dict, viscosity_scale: float) -> dict:
+    """Physical predictions (G_test, 3) of the physics-only rows (module docstring) from ``physics``
+    (G, 3): one-solve η_r, contact-spring Π [σ0], counted Z_μ."""
+    from rheograph.graphs.features import inverse_transform
+
+    solve = test["physics"].copy()
+    eta_true = inverse_transform(train["y"][:, 0], viscosity_scale)
+    ok = (eta_true > 0) & (train["physics"][:, 0] > 0)
+    log_offset = np.log(np.where(ok, eta_true, 1.0)) - np.log(np.where(ok, train["physics"][:, 0], 1.0))
+    # the mean log offset at the same (phi, sigma): stress_mean on a table whose first column is it
+    table = {**train, "y": np.where(ok, log_offset, np.nan)[:, None]}
+    table = {k: (v[ok] if isinstance(v, np.ndarray) and len(v) == len(ok) else v) for k, v in table.items()}
+    offset = stress_mean(table, test)[:, 0]
+    shifted = solve.copy()
+    with np.errstate(invalid="ignore"):
+        shifted[:, 0] = np.where(solve[:, 0] > 0, solve[:, 0] * np.exp(offset), solve[:, 0])
+    return {"physics_solve": solve, "physics_offset": shifted}
 
 
 def dataset_arrays(dataset, index) -> dict:
@@ -100,6 +126,7 @@ def dataset_arrays(dataset, index) -> dict:
         "descriptors": dataset.descriptors[index].numpy(),
         "stress": dataset.stress[index].numpy(),
         "phi": dataset.phi[index].numpy(),
+        "physics": dataset.physics[index].numpy(),
     }
     inputs = list(dataset.settings.graph_inputs)
     computed = [inputs.index(name) for name in inputs if name in COMPUTED_GRAPH_INPUTS]

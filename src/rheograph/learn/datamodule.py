@@ -21,7 +21,7 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from rheograph.errors import InputError
-from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
+from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, SnapshotGraphDataset
 from rheograph.learn.jamming import fit_jam_map
 from rheograph.naming import state_point_key
 
@@ -101,6 +101,7 @@ class SnapshotDataModule(L.LightningDataModule):
         phi: float | None = None,
         n_particles: int | None = None,
         train_fraction: float = 1.0,
+        lfdem_params: str | None = None,
     ):
         super().__init__()
         if split not in SPLITS:
@@ -118,6 +119,7 @@ class SnapshotDataModule(L.LightningDataModule):
         self.split, self.split_seed, self.batch_size = split, split_seed, batch_size
         self.num_workers, self.phi, self.n_particles = num_workers, phi, n_particles
         self.train_fraction = train_fraction
+        self.lfdem_params = lfdem_params
         self.dataset = None
 
     def selected_files(self) -> list[str]:
@@ -127,7 +129,7 @@ class SnapshotDataModule(L.LightningDataModule):
         for key, wanted in (("phi", self.phi), ("n_particles", self.n_particles)):
             if wanted is None:
                 continue
-            files = [f for f in files if np.isclose(trajectory_param(f, key), wanted)]
+            files = [f for f in files if np.isclose(trajectory_param(f, key, self.lfdem_params), wanted)]
             if not files:
                 raise InputError(f"data.{key}={wanted}: no trajectory with this value in data.files")
         return files
@@ -136,7 +138,7 @@ class SnapshotDataModule(L.LightningDataModule):
         if self.dataset is not None:
             return
         self.files = self.selected_files()
-        dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir)
+        dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir, self.lfdem_params)
         index = np.arange(len(dataset))
         self.dataset = dataset
         runs = dataset.run_id.numpy()
@@ -179,7 +181,9 @@ class SnapshotDataModule(L.LightningDataModule):
             "phi": [float(dataset.phi[train].min()), float(dataset.phi[train].max())],
             "stress": [float(dataset.stress[train].min()), float(dataset.stress[train].max())],
             "n_particles": sorted({int(n) for n in dataset.n_particles[train]}),
-            "size_ratio": sorted({round(trajectory_param(f, "size_ratio"), 6) for f in self.files}),
+            "size_ratio": sorted(
+                {round(trajectory_param(f, "size_ratio", self.lfdem_params), 6) for f in self.files}
+            ),
             "edge_min": edges.min(dim=0).values.tolist(),
             "edge_max": edges.max(dim=0).values.tolist(),
             # which trained state points jammed (rheograph.learn.jamming): the surrogate's jam rule
@@ -189,6 +193,8 @@ class SnapshotDataModule(L.LightningDataModule):
                 dataset.run_id[train].numpy(),
                 dataset.jammed[train].numpy(),
             ),
+            # the suspension a snapshot must match, and the step of the one-solve input (predict.py)
+            **suspension_record(self.files, self.lfdem_params),
         }
 
     def split_record(self) -> dict:
@@ -243,17 +249,77 @@ def thin_snapshots(idx: np.ndarray, runs: np.ndarray, fraction: float) -> np.nda
     return np.sort(np.concatenate(kept))
 
 
-def trajectory_param(path: str, key: str) -> float:
-    """A simulation parameter of a trajectory file."""
+def source_summary(path: str, lfdem_params=None) -> dict:
+    """State point, N, physical parameters and simulation step of a snapshot source: ``phi``,
+    ``stress``, ``n_particles``, ``params`` (physical), ``numerics`` (rheograph.io.snapshots)."""
     from rheograph.io.hdf5 import read_params
+    from rheograph.io.snapshots import PHYSICAL_PARAMS, read_snapshots, source_kind
 
-    try:
-        return float(read_params(path)[key])
-    except (OSError, KeyError) as exc:
+    if source_kind(path) == "rheograph":
+        try:
+            stored = read_params(path)  # the parameters only: no snapshot is read
+            return {
+                "phi": float(stored["phi"]),
+                "stress": float(stored["stress"]),
+                "n_particles": int(stored["n_particles"]),
+                "params": {k: stored[k] for k in PHYSICAL_PARAMS if k in stored},
+                "numerics": {k: stored[k] for k in SOLVE_NUMERICS if k in stored},
+            }
+        except (OSError, KeyError, ValueError):
+            pass  # held by a running simulation, or without the root params: the reader says what
+    snaps = read_snapshots(path, lfdem_params)
+    return {
+        "phi": snaps.phi,
+        "stress": snaps.stress,
+        "n_particles": snaps.n_particles,
+        "params": snaps.params,
+        "numerics": snaps.numerics,
+    }
+
+
+def trajectory_param(path: str, key: str, lfdem_params=None) -> float:
+    """``phi``, ``stress``, ``n_particles`` or a physical parameter of a snapshot source."""
+    summary = source_summary(path, lfdem_params)
+    value = summary[key] if key in summary else summary["params"].get(key)
+    if value is None:
+        raise InputError(f"{path}: does not record its parameter {key}")
+    return float(value)
+
+
+def suspension_record(files, lfdem_params=None) -> dict:
+    """What a model trained on ``files`` needs a snapshot to match, and how its one-solve input was
+    computed: ``physical_params`` (PHYSICAL_PARAMS, one value each: files of different suspensions are
+    refused, a model has no input for them) and ``solve_numerics``, per area fraction and N the step
+    (``disp_max``, ``dt_max``, ``lagged_step_control``) the one-solve input of its graphs used."""
+    from rheograph.io.snapshots import PHYSICAL_PARAMS
+    from rheograph.sim.params import SimParams
+
+    physical, numerics = {}, {}
+    defaults = SimParams.defaults()
+    for path in files:
+        summary = source_summary(path, lfdem_params)
+        for key in PHYSICAL_PARAMS:
+            if key not in summary["params"]:
+                raise InputError(f"{path}: does not record the physical parameter {key}")
+            physical.setdefault(key, set()).add(round(float(summary["params"][key]), 9))
+        step = {k: summary["numerics"].get(k, defaults[k]) for k in SOLVE_NUMERICS}
+        key = (round(summary["phi"], 6), summary["n_particles"])
+        numerics.setdefault(key, set()).add(tuple(step.items()))
+    mixed = {k: sorted(v) for k, v in physical.items() if len(v) > 1}
+    if mixed:
         raise InputError(
-            f"{path}: cannot read its parameter {key} ({exc}); a file still being written by a simulation "
-            "is locked — train on a sweep index (python -m rheograph.collect) that lists finished runs only"
-        ) from exc
+            f"data.files mixes suspensions ({mixed}): a model has no input for these parameters; train one "
+            "model per suspension"
+        )
+    solve = []
+    for (phi, n), steps in sorted(numerics.items()):
+        if len(steps) > 1:
+            raise InputError(
+                f"data.files: the runs at phi = {phi:g}, N = {n} were made with different steps "
+                f"{sorted(steps)}: their one-solve inputs would not be computed alike"
+            )
+        solve.append({"phi": phi, "n_particles": n, **dict(next(iter(steps)))})
+    return {"physical_params": {k: next(iter(v)) for k, v in physical.items()}, "solve_numerics": solve}
 
 
 def expand_files(files) -> list[str]:

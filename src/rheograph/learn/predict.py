@@ -1,26 +1,42 @@
-"""Predict eta_r, Pi, Z_mu for every snapshot of a trajectory file with the fold models of a training run
-(an ensemble: mean and spread over folds), in one batched pass.
+"""Predict η_r, Π, Z_μ for every snapshot of any source — rheograph trajectories, bare snapshot files,
+LF_DEM runs (rheograph.io.snapshots) — or for arrays handed over from Python, with an ensemble of fold
+models: a shipped model (``--list-models``) or a training run directory.
 
-    python predict.py --models outputs/train/<run> --input trajectory.h5 --out predictions.csv
+    python predict.py --models N400_phi0.76 --input trajectory.h5 snapshot.npz par_run.dat --out p.csv
+    python predict.py --list-models
+
+    import rheograph
+    model = rheograph.load_model("N400_phi0.76")
+    table = model.predict(positions, radii, box, le_offset, stress=10, phi=0.76, mu=0.5, ...)
 
 Model bundles (``fold*.pt``) are loaded with ``torch.load(weights_only=True)``: no code is unpickled.
-Each bundle records the domain it was trained on; every prediction carries ``in_domain`` (the state point
-lies in the trained phi, sigma and N ranges, and the snapshot's edge features in the trained ranges),
-and a warning names what lies outside.  Inputs the model cannot read (another size ratio) are refused.
 
-Columns per target: ``*_pred`` (ensemble mean), ``*_pred_std`` (spread over the fold models: flags
-disagreement, too narrow to be an error bar), ``*_pred_err`` (the cross-validated error bar of the
-training run's ``error_model.json``, rheograph.learn.error_model: one RMS of held-out residuals, in log10
-units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time — and absolute for
-Z_μ; absent for runs without an error model) and ``*_sim`` (the simulator's value); ``jammed_fraction``:
-the share of training trajectories at the nearest trained state point that shear-jammed
+A model is trained on one suspension: every physical parameter it depends on (``PHYSICAL_PARAMS``) must
+come with the snapshot and equal the model's; an absent or different one is refused in one line, never
+filled in (``accept_mismatch`` / ``--accept-mismatch`` predicts anyway, flagged out of domain, and the
+output records it).  The step of the one-solve input is the model's own (its bundle), whatever step the
+snapshot's simulation used.
+
+One row per snapshot.  Columns: ``source``, ``snapshot`` (index in its source), ``strain``, ``stress``,
+``phi``, ``in_domain`` (1: the state point, N, position precision and edge features lie in what the model
+was trained on), ``notes`` (why not, and any accepted mismatch); per target ``*_pred`` (ensemble mean),
+``*_pred_std`` (spread over the fold models: flags disagreement, too narrow to be an error bar),
+``*_pred_err`` (the cross-validated error bar of the model's ``error_model.json``: one RMS of held-out
+residuals, log10 units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time —
+absolute for Z_μ) and ``*_sim`` (the source's own value, NaN where it has none); the physics-only
+values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed stress),
+``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and ``z_mu_counted`` (the
+CLM's frictional contacts counted); ``jammed_fraction``: the
+share of training trajectories at the nearest trained state point that shear-jammed
 (rheograph.learn.jamming; jammed when >= 0.5).
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -28,11 +44,18 @@ import numpy as np
 import torch
 
 from rheograph.errors import InputError
-from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
+from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
+from rheograph.io.snapshots import PHYSICAL_PARAMS, Snapshots, read_snapshots, snapshots_from_values
 from rheograph.learn.error_model import predicted_error, read_error_model
 from rheograph.learn.jamming import jammed_fraction
 from rheograph.learn.module import TARGET_NAMES, SurrogateModule
+from rheograph.learn.registry import list_models, model_paths, read_card
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
+
+# Models trained on simulator output read overlaps of ~1e-3 a exactly (positions stored to 1e-7 a):
+# positions known only to a worse RMS precision [a] than this are outside their domain.  3e-5 a is the
+# rounding of LF_DEM's 6-digit par files at N = 2000 box edges (docs/results.md, "LF_DEM snapshots").
+EXACT_POSITION_PRECISION = 3e-5
 
 
 def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]:
@@ -55,27 +78,27 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
     return module, GraphSettings(**graph), bundle["domain"]
 
 
-def _trajectory_params(path) -> dict:
-    from rheograph.io.hdf5 import read_params
-
-    try:
-        return read_params(path)
-    except (OSError, KeyError) as exc:
-        raise InputError(
-            f"{path}: not a readable rheograph trajectory ({exc}); check the path, or move a truncated "
-            "file aside and rerun its simulation"
-        ) from exc
-
-
-def domain_report(domain: dict, params: dict, graphs, edge_features) -> tuple[np.ndarray, list[str]]:
+def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tuple[np.ndarray, list[str]]:
     """Per-snapshot in-domain flags (S,) and the reasons for any snapshot outside."""
     reasons = []
-    for key in ("phi", "stress"):
+    for key, value in (("phi", snaps.phi), ("stress", snaps.stress)):
         low, high = domain[key]
-        if not low * (1 - 1e-9) <= params[key] <= high * (1 + 1e-9):
-            reasons.append(f"{key} = {params[key]:g} outside the trained [{low:g}, {high:g}]")
-    if params["n_particles"] not in domain["n_particles"]:
-        reasons.append(f"N = {params['n_particles']} not among the trained N {domain['n_particles']}")
+        # phi to the 1e-3 a file's stated value may differ from its radii and box by (check_geometry)
+        slack = 1e-3 if key == "phi" else 1e-9 * high
+        if not low - slack <= value <= high + slack:
+            reasons.append(f"{key} = {value:g} outside the trained [{low:g}, {high:g}]")
+    if snaps.n_particles not in domain["n_particles"]:
+        reasons.append(f"N = {snaps.n_particles} not among the trained N {domain['n_particles']}")
+    trained_noise = float(domain.get("position_noise", 0.0))
+    if snaps.position_noise > max(trained_noise, EXACT_POSITION_PRECISION):
+        reasons.append(
+            f"positions known to {snaps.position_noise:.2g} a, the model was trained on "
+            + (
+                "exact positions (it reads overlaps of ~1e-3 a)"
+                if not trained_noise
+                else f"{trained_noise:g} a"
+            )
+        )
     flags = np.full(len(graphs), not reasons)
     low, high = np.array(domain["edge_min"]), np.array(domain["edge_max"])
     span = np.maximum(high - low, 1e-12)
@@ -91,84 +114,274 @@ def domain_report(domain: dict, params: dict, graphs, edge_features) -> tuple[np
     return flags, reasons
 
 
-def predict_file(model_paths, trajectory: str | Path) -> dict:
-    """Ensemble prediction for all snapshots of ``trajectory``: arrays (S,) per column."""
-    if not model_paths:
-        raise InputError("no model bundles (fold*.pt) given: --models must name a training run directory")
-    models = [load_bundle(p) for p in sorted(model_paths)]
-    settings = dataclasses.replace(models[0][1], min_strain=0.0)
-    if any(dataclasses.replace(s, min_strain=0.0) != settings for _, s, _ in models):
-        raise InputError("the model bundles were trained with different graph settings")
-    params = _trajectory_params(trajectory)
-    domain = models[0][2]
-    if round(params["size_ratio"], 6) not in domain["size_ratio"]:
-        raise InputError(
-            f"{trajectory}: size ratio {params['size_ratio']} but the model was trained on "
-            f"{domain['size_ratio']}: its one-hot radius input cannot represent these particles"
+class Surrogate:
+    """An ensemble of fold models with what they were trained on (``domain``) and, for a shipped model,
+    its card; ``load_model`` makes one."""
+
+    def __init__(self, bundle_paths: list[Path], label: str):
+        if not bundle_paths:
+            raise InputError("no model bundles (fold*.pt) given: name a shipped model or a training run")
+        self.label = label
+        self.paths = sorted(bundle_paths)
+        self.models = [load_bundle(p) for p in self.paths]
+        self.settings = dataclasses.replace(self.models[0][1], min_strain=0.0)
+        if any(dataclasses.replace(s, min_strain=0.0) != self.settings for _, s, _ in self.models):
+            raise InputError(f"{label}: the model bundles were trained with different graph settings")
+        self.domain = self.models[0][2]
+        for key in ("physical_params", "solve_numerics"):
+            if key not in self.domain:
+                raise InputError(
+                    f"{label}: the bundles do not record the suspension they were trained on ({key}); "
+                    "make a shipped model of the run (python -m rheograph.learn.registry ship RUN --name X)"
+                )
+        self.card = read_card(self.paths)
+        self.error_model = read_error_model(self.paths[0].parent)
+
+    @property
+    def physical_params(self) -> dict:
+        return dict(self.domain["physical_params"])
+
+    def solve_numerics(self, phi: float, n_particles: int) -> dict:
+        """The one-solve step the model's training graphs used at the nearest trained φ (then N)."""
+        entries = self.domain["solve_numerics"]
+        best = min(
+            entries, key=lambda e: (abs(e["phi"] - phi), abs(math.log(e["n_particles"] / n_particles)))
         )
-    graphs = snapshot_graphs(trajectory, settings, run_id=0)
-    if not graphs:
-        raise InputError(f"{trajectory}: no snapshot with finite targets to predict")
-    preds = []
-    for module, _, _ in models:
-        pred, true, meta = predict_dataset(module, graphs, batch_size=len(graphs))
-        preds.append(pred)
-    preds = np.stack(preds)  # (models, S, 3)
-    in_domain, reasons = domain_report(domain, params, graphs, settings.edge_features)
-    if reasons:
-        print(
-            f"warning: {trajectory}: input outside the training domain: " + "; ".join(reasons),
-            file=sys.stderr,
+        return {k: best[k] for k in SOLVE_NUMERICS}
+
+    def check_params(self, snaps: Snapshots, accept_mismatch: bool) -> list[str]:
+        """Notes on accepted mismatches; refuses an absent or different physical parameter unless
+        ``accept_mismatch``."""
+        wanted = self.physical_params
+        missing = [k for k in PHYSICAL_PARAMS if k in wanted and k not in snaps.params]
+        if missing:
+            raise InputError(
+                f"{snaps.source}: the physical parameter(s) {missing} are not given; model {self.label} was "
+                f"trained at {', '.join(f'{k}={wanted[k]:g}' for k in missing)}: give them with the snapshot "
+                "(file keys, predict.py --param KEY=VALUE, or keyword arguments of model.predict)"
+            )
+        differ = [
+            k for k in wanted if not math.isclose(float(snaps.params[k]), float(wanted[k]), rel_tol=1e-6)
+        ]
+        if not differ:
+            return []
+        text = ", ".join(f"{k} = {float(snaps.params[k]):g} (model: {float(wanted[k]):g})" for k in differ)
+        if not accept_mismatch:
+            raise InputError(
+                f"{snaps.source}: another suspension than model {self.label} was trained on: {text}; use a "
+                "model of this suspension (predict.py --list-models), or --accept-mismatch to predict anyway "
+                "(flagged out of domain)"
+            )
+        return [f"accepted parameter mismatch: {text}"]
+
+    def predict_snapshots(self, snaps: Snapshots, accept_mismatch: bool = False) -> dict:
+        """One row per snapshot of ``snaps``: a dict of (S,) columns (module docstring)."""
+        if round(snaps.params.get("size_ratio", 0.0), 6) not in self.domain["size_ratio"]:
+            raise InputError(
+                f"{snaps.source}: size ratio {snaps.params.get('size_ratio')} but model {self.label} was "
+                f"trained on {self.domain['size_ratio']}: its one-hot radius input cannot represent these "
+                "particles"
+            )
+        notes = self.check_params(snaps, accept_mismatch)
+        if not len(snaps):
+            raise InputError(f"{snaps.source}: holds no snapshot")
+        graphs = snapshot_graphs(
+            snaps,
+            self.settings,
+            run_id=0,
+            solve_numerics=self.solve_numerics(snaps.phi, snaps.n_particles),
+            training=False,
         )
-    out = {
-        "strain": np.array([g.strain.item() for g in graphs]),
-        "stress": meta["stress"],
-        "phi": meta["phi"],
-        "in_domain": in_domain.astype(np.int64),
-    }
-    if "jam_map" in domain:  # bundles of older versions have none
-        out["jammed_fraction"] = jammed_fraction(domain["jam_map"], meta["phi"], meta["stress"])
-    error_model = read_error_model(Path(sorted(model_paths)[0]).parent)
-    errors = predicted_error(error_model, meta["stress"], meta["phi"]) if error_model else None
-    for k, name in enumerate(TARGET_NAMES):
-        out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
-        out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
-        if errors is not None:
-            out[f"{name}_pred_err"] = errors[:, k]
-        out[f"{name}_sim"] = true[:, k]
+        preds = []
+        for module, _, _ in self.models:
+            pred, true, meta = predict_dataset(module, graphs, batch_size=64)
+            preds.append(pred)
+        preds = np.stack(preds)  # (models, S, 3)
+        in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings.edge_features)
+        if notes:
+            in_domain[:] = False
+        reasons = notes + reasons
+        if reasons:
+            print(
+                f"warning: {snaps.source}: outside model {self.label}'s domain: " + "; ".join(reasons),
+                file=sys.stderr,
+            )
+        n = len(graphs)
+        out = {
+            "source": np.array([snaps.source] * n),
+            "snapshot": np.arange(n),
+            "strain": snaps.strain.copy(),
+            "stress": meta["stress"],
+            "phi": meta["phi"],
+            "in_domain": in_domain.astype(np.int64),
+            "notes": np.array(["; ".join(reasons) if not ok or notes else "" for ok in in_domain]),
+        }
+        if "jam_map" in self.domain:
+            out["jammed_fraction"] = jammed_fraction(self.domain["jam_map"], meta["phi"], meta["stress"])
+        # physics only, nothing learned: the one-solve eta_r, the contact-spring pressure, the counted Z_mu
+        physics = np.concatenate([g.physics.numpy() for g in graphs])
+        out.update(eta_solve=physics[:, 0], pressure_spring=physics[:, 1], z_mu_counted=physics[:, 2])
+        errors = predicted_error(self.error_model, meta["stress"], meta["phi"]) if self.error_model else None
+        for k, name in enumerate(TARGET_NAMES):
+            out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
+            out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
+            if errors is not None:
+                out[f"{name}_pred_err"] = errors[:, k]
+            out[f"{name}_sim"] = true[:, k]
+        return out
+
+    def predict(
+        self,
+        positions,
+        radii,
+        box,
+        le_offset,
+        stress: float,
+        phi: float,
+        *,
+        strain=None,
+        position_noise: float = 0.0,
+        eta_r=None,
+        pressure=None,
+        z_mu=None,
+        accept_mismatch: bool = False,
+        **params,
+    ) -> dict:
+        """Predict for configurations given as arrays (units of the small radius a): ``positions`` (S, N, 2)
+        or (N, 2), ``radii`` (N,), ``box`` = (Lx, Ly), ``le_offset`` (S,) or a number (x-shift of the
+        periodic image above), ``stress`` σ/σ0, ``phi``, and the physical parameters as keyword
+        arguments named as the ``sim.*`` keys (``mu``, ``kn_coefficient``, ``kt_ratio``, ``delta``,
+        ``lub_max_gap``).  Optional: ``strain`` and the true ``eta_r``, ``pressure``, ``z_mu`` (S,) for the
+        ``*_sim`` columns; ``position_noise`` [a], the positions' precision.  Returns one row per
+        configuration as a dict of columns (``pandas.DataFrame(table)`` makes a data frame)."""
+        unknown = sorted(set(params) - set(PHYSICAL_PARAMS))
+        if unknown:
+            raise InputError(
+                f"model.predict: unknown keyword(s) {unknown}; the physical parameters are "
+                f"{list(PHYSICAL_PARAMS)}"
+            )
+        values = {
+            "positions": positions,
+            "radii": radii,
+            "box": box,
+            "le_offset": le_offset,
+            "stress": stress,
+            "phi": phi,
+            "position_noise": position_noise,
+            **params,
+        }
+        for key, value in (("strain", strain), ("eta_r", eta_r), ("pressure", pressure), ("z_mu", z_mu)):
+            if value is not None:
+                values[key] = value
+        snaps = snapshots_from_values(values, "model.predict", kind="api")
+        return self.predict_snapshots(snaps, accept_mismatch)
+
+
+def load_model(name_or_path: str | Path) -> Surrogate:
+    """A shipped model by name (``rheograph.list_models()``), a training run directory or a bundle."""
+    paths, label = model_paths(name_or_path)
+    return Surrogate(paths, label)
+
+
+# ---- command line ---------------------------------------------------------------------------------
+def _parse_param(text: str) -> tuple[str, float]:
+    key, sep, value = text.partition("=")
+    if not sep or key not in PHYSICAL_PARAMS:
+        raise InputError(f"--param {text}: expected KEY=VALUE with KEY one of {list(PHYSICAL_PARAMS)}")
+    try:
+        return key, float(value)
+    except ValueError as exc:
+        raise InputError(f"--param {text}: {value!r} is not a number") from exc
+
+
+def concatenate(tables: list[dict]) -> dict:
+    columns = list(tables[0])
+    for table in tables[1:]:
+        columns += [c for c in table if c not in columns]
+    out = {}
+    for c in columns:
+        parts = []
+        for t in tables:
+            n = len(t["snapshot"])
+            if c in t:
+                parts.append(t[c])
+            else:  # a column one model run has and another lacks (e.g. no error model)
+                parts.append(np.full(n, np.nan))
+        out[c] = np.concatenate(parts)
     return out
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--models", required=True, help="training run directory holding fold*.pt (or one .pt)")
-    ap.add_argument("--input", required=True, help="trajectory .h5 file")
-    ap.add_argument("--out", required=True, help="output .csv or .h5")
-    args = ap.parse_args(argv)
-    models = Path(args.models)
-    if not models.exists():
-        raise InputError(f"--models {models} does not exist")
-    paths = [models] if models.is_file() else sorted(models.glob("fold*.pt"))
-    result = predict_file(paths, args.input)
-    out = Path(args.out)
+def write_table(table: dict, out: Path, header: dict) -> None:
+    """CSV (``#``-comment lines with ``header`` first) or HDF5 (``header`` as attributes)."""
     if out.suffix == ".h5":
         import h5py
 
         with h5py.File(out, "w") as h5:
-            for key, value in result.items():
-                h5[key] = value
-            h5.attrs["models"] = [str(p) for p in paths]
-    else:
-        cols = list(result)
-        np.savetxt(
-            out,
-            np.stack([result[c] for c in cols], axis=1),
-            delimiter=",",
-            header=",".join(cols),
-            comments="",
-        )
-    n_out = int((result["in_domain"] == 0).sum())
+            for key, value in table.items():
+                h5[key] = value.astype("S") if value.dtype.kind == "U" else value
+            for key, value in header.items():
+                h5.attrs[key] = value
+        return
+    with open(out, "w", newline="") as fh:
+        for key, value in header.items():
+            fh.write(f"# {key}: {value}\n")
+        writer = csv.writer(fh)
+        columns = list(table)
+        writer.writerow(columns)
+        for row in zip(*(table[c] for c in columns)):
+            writer.writerow([f"{v:.9g}" if isinstance(v, float | np.floating) else v for v in row])
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument(
+        "--models", help="a shipped model's name (--list-models), a training run directory or a .pt"
+    )
+    ap.add_argument(
+        "--input", nargs="+", help="snapshot sources: trajectory .h5, bare .npz/.h5, LF_DEM par_*.dat"
+    )
+    ap.add_argument("--out", help="output .csv or .h5")
+    ap.add_argument("--list-models", action="store_true", help="list the shipped models and exit")
+    ap.add_argument("--lfdem-params", help="LF_DEM's parameter file for LF_DEM inputs (default: input_*.dat)")
+    ap.add_argument(
+        "--param", action="append", default=[], metavar="KEY=VALUE", help="a physical parameter of the inputs"
+    )
+    ap.add_argument(
+        "--accept-mismatch",
+        action="store_true",
+        help="predict for inputs of another suspension than the model's (flagged out of domain)",
+    )
+    args = ap.parse_args(argv)
+    if args.list_models:
+        for name in list_models():
+            card = read_card(model_paths(name)[0])
+            d = card["domain"]
+            print(
+                f"{name}: phi {d['phi'][0]:g}-{d['phi'][1]:g}, sigma/sigma0 {d['stress'][0]:g}-"
+                f"{d['stress'][1]:g}, N {d['n_particles']}, position noise {card['position_noise']:g} a"
+            )
+        return
+    for name in ("models", "input", "out"):
+        if getattr(args, name) is None:
+            ap.error(f"--{name} is required (or --list-models)")
+    model = load_model(args.models)
+    given = dict(_parse_param(p) for p in args.param)
+    tables = []
+    for path in args.input:
+        snaps = read_snapshots(path, args.lfdem_params)
+        if given:
+            snaps.params = {**snaps.params, **given}
+        tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
+    table = concatenate(tables)
+    out = Path(args.out)
+    header = {"model": model.label, "inputs": " ".join(args.input)}
+    if given:
+        header["parameters given"] = ", ".join(f"{k}={v:g}" for k, v in given.items())
+    if args.accept_mismatch:
+        header["accept_mismatch"] = "true"
+    write_table(table, out, header)
+    n_out = int((table["in_domain"] == 0).sum())
     print(
-        f"{len(result['strain'])} snapshots ({n_out} outside the training domain), "
-        f"{len(paths)} model(s) -> {out}"
+        f"{len(table['snapshot'])} snapshots ({n_out} outside the model's domain), model {model.label} "
+        f"-> {out}"
     )

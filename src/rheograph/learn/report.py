@@ -15,6 +15,8 @@ BASELINE_LABELS = {
     "descriptors": "baseline: descriptors + σ (trees)",
     "descriptors_ridge": "baseline: descriptors, positions only (ridge)",
     "descriptors_solve": "baseline: descriptors + σ + one-solve η_r (trees)",
+    "physics_solve": "physics only: one-solve η_r, contact-spring Π, counted Z_μ",
+    "physics_offset": "physics only: one-solve η_r + (φ, σ) offset, contact-spring Π, counted Z_μ",
 }
 
 

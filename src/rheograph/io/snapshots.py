@@ -1,0 +1,398 @@
+"""Snapshots from anywhere: rheograph trajectories, bare configuration files and LF_DEM runs, read into
+one in-memory form (``Snapshots``) that graph building and prediction take.
+
+Three kinds of source (``read_snapshots`` tells them apart by their content and name):
+
+* a **rheograph trajectory** (HDF5 with ``/snapshots``, docs/data_format.md), finished, jammed, still
+  being written (then its copy as of the last checkpoint is read) or stripped of its time series;
+* a **bare snapshot file** (``.npz``, or HDF5 with the same keys as datasets or root attributes):
+  ``positions`` (S, N, 2) or (N, 2) [a], ``radii`` (N,) [a], ``box`` (2,) = (Lx, Ly) [a], ``le_offset``
+  (S,) or a scalar [a] (x-shift of the periodic image above, y + Ly), ``stress`` (σ/σ0), ``phi``, and the
+  physical parameters ``PHYSICAL_PARAMS`` named as the ``sim.*`` keys; optional ``strain``, ``eta_r``,
+  ``pressure``, ``z_mu`` (S,), ``position_noise`` [a] and ``disp_max``;
+* an **LF_DEM run**: its ``par_*.dat`` (plain or ``.gz``), see ``rheograph.io.lfdem``.
+
+Positions are wrapped into rheograph's box [-Lx/2, Lx/2) x [-Ly/2, Ly/2) with the Lees–Edwards images
+(a uniform shift of all positions does not change the rheology of a sheared periodic box).  Nothing is
+filled in: a parameter the source does not carry stays absent, and whoever needs it (the graph builder, a
+model) names it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rheograph.errors import InputError
+
+# what a snapshot's physics depends on: they describe the suspension and come with the snapshot
+PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "critical_load", "size_ratio")
+# of them, those a bare file must carry (critical_load is the unit of force, 1 by definition, and the size
+# ratio is read off the radii)
+BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")
+TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
+
+
+@dataclass
+class Snapshots:
+    """S configurations of one N-particle system at one state point, in rheograph's units and box.
+
+    ``positions`` (S, N, 2) [a] wrapped into the primary box; ``radii`` (N,) [a], smallest 1; ``lx``,
+    ``ly`` [a]; ``le_offset`` (S,) [a]; ``strain`` (S,) (NaN where the source does not say); ``stress``
+    σ/σ0; ``phi`` area fraction; ``params``: the physical parameters the source carries (a subset of
+    ``PHYSICAL_PARAMS``); ``numerics``: the simulation step the source was made with, where known
+    (``disp_max``, ``dt_max``, ``lagged_step_control``); ``targets`` (S, 3): η_r, Π [σ0], Z_μ (NaN where
+    unknown); ``jammed`` (S,) bool (arrested packings, whose η_r is not a target); ``contacts``: per
+    snapshot the recorded contact states (pairs, states, stretches) of a rheograph trajectory, else None;
+    ``position_noise`` [a]: the stated precision of the positions (0 for exact simulator output)."""
+
+    source: str
+    kind: str
+    positions: np.ndarray
+    radii: np.ndarray
+    lx: float
+    ly: float
+    le_offset: np.ndarray
+    strain: np.ndarray
+    stress: float
+    phi: float
+    params: dict
+    targets: np.ndarray
+    jammed: np.ndarray
+    numerics: dict = field(default_factory=dict)
+    contacts: list | None = None
+    position_noise: float = 0.0
+    status: str = ""
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.radii.size)
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    def graph_params(self) -> dict:
+        """The parameter mapping graph features and the one-solve read: physical parameters, the state
+        point and N (``rheograph.graphs.features``)."""
+        return {**self.params, "stress": self.stress, "phi": self.phi, "n_particles": self.n_particles}
+
+    def missing_params(self, names=PHYSICAL_PARAMS) -> list[str]:
+        return [name for name in names if name not in self.params]
+
+
+def wrap_into_box(positions: np.ndarray, lx: float, ly: float, le_offset: float) -> np.ndarray:
+    """Positions (N, 2) [a], anywhere, mapped into [-Lx/2, Lx/2) x [-Ly/2, Ly/2): each crossing of the
+    top (bottom) boundary shifts x by -(+) le_offset, as the Lees–Edwards images do."""
+    out = np.array(positions, dtype=np.float64)
+    images = np.floor(out[:, 1] / ly + 0.5)
+    out[:, 1] -= images * ly
+    out[:, 0] -= images * le_offset
+    out[:, 0] -= lx * np.floor(out[:, 0] / lx + 0.5)
+    return out
+
+
+def area_fraction(radii, lx: float, ly: float) -> float:
+    return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
+
+
+def check_geometry(where: str, radii, lx, ly, phi) -> None:
+    """Radii in units of the small radius, a positive box, and the stated φ equal to the one the radii
+    and box give (to 1e-3: files round it)."""
+    radii = np.asarray(radii, dtype=np.float64)
+    if radii.ndim != 1 or radii.size < 2 or not np.all(np.isfinite(radii)) or radii.min() <= 0:
+        raise InputError(f"{where}: radii must be (N,) positive numbers, N >= 2")
+    if not math.isclose(float(radii.min()), 1.0, rel_tol=1e-6):
+        raise InputError(
+            f"{where}: lengths must be in units of the small radius a (smallest radius 1, found "
+            f"{radii.min():.6g}): divide positions, radii, box and le_offset by it"
+        )
+    if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
+        raise InputError(f"{where}: box must be two positive lengths (Lx, Ly) [a], found ({lx}, {ly})")
+    measured = area_fraction(radii, lx, ly)
+    if not math.isclose(measured, phi, abs_tol=1e-3):
+        raise InputError(
+            f"{where}: phi = {phi:g} but the radii and box give an area fraction {measured:.6g}: check the "
+            "box (Lx, Ly) and the radii's units"
+        )
+
+
+def _size_ratio(radii) -> float:
+    return round(float(np.max(radii) / np.min(radii)), 6)
+
+
+# ---- rheograph trajectories ------------------------------------------------------------------------
+def _open_trajectory(path: Path) -> tuple[h5py.File, Path]:
+    """The file, or where a simulation still holds it (HDF5 file lock), its copy as of the last
+    checkpoint (consistent on disk: written right after a flush)."""
+    from rheograph.io.hdf5 import last_checkpoint_copy
+
+    try:
+        return h5py.File(path, "r"), path
+    except OSError as exc:
+        copy = last_checkpoint_copy(path)
+        if "lock" in str(exc).lower() and copy.exists():
+            return h5py.File(copy, "r"), copy
+        raise InputError(
+            f"{path}: cannot be opened as HDF5 ({exc}); if it is truncated or corrupt, move it aside and "
+            "rerun that state point"
+        ) from exc
+
+
+def read_trajectory(path: str | Path) -> Snapshots:
+    """The snapshots of a rheograph-layout trajectory (``/snapshots``, ``/radii``, root ``params``)."""
+    from rheograph.analysis import jammed_snapshots
+    from rheograph.io.hdf5 import SCHEMA_VERSION
+
+    path = Path(path)
+    h5, opened = _open_trajectory(path)
+    with h5:
+        version = h5.attrs.get("schema_version")
+        if version is not None and int(version) != SCHEMA_VERSION:
+            raise InputError(f"{path}: trajectory schema {int(version)}, this version reads {SCHEMA_VERSION}")
+        for key in ("radii", "snapshots/positions", "snapshots/le_offset"):
+            if key not in h5:
+                raise InputError(f"{path}: no /{key}: not a trajectory (docs/data_format.md)")
+        try:
+            params = json.loads(h5.attrs["params"])
+        except (KeyError, ValueError) as exc:
+            raise InputError(f"{path}: no readable root attribute 'params' (JSON of the sim.* keys)") from exc
+        for key in ("stress", "phi"):
+            if key not in params:
+                raise InputError(f"{path}: its params lack '{key}' (the state point): add it to the file")
+        for key in ("lx", "ly"):
+            if key not in h5.attrs:
+                raise InputError(f"{path}: no root attribute '{key}' (box length [a])")
+        lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
+        radii = h5["radii"][()].astype(np.float64)
+        sn = h5["snapshots"]
+        count = sn["positions"].shape[0]
+        if opened != path or str(h5.attrs.get("status", "")) == "running":
+            # rows a running file appended after its last checkpoint may be half written
+            counters = json.loads(h5["checkpoint"].attrs["counters"]) if "checkpoint" in h5 else {}
+            count = min(count, int(counters.get("snapshots", count)))
+        positions = sn["positions"][:count].astype(np.float64)
+        offsets = sn["le_offset"][:count].astype(np.float64)
+        strain = sn["strain"][:count] if "strain" in sn else np.full(count, np.nan)
+        targets = np.stack(
+            [
+                sn[name][:count] if name in sn else np.full(count, np.nan)
+                for name in ("viscosity", "pressure", "z_mu")
+            ],
+            axis=1,
+        ).astype(np.float64)
+        status = str(h5.attrs.get("status", ""))
+        if "timeseries/strain" in h5:
+            jammed = jammed_snapshots(
+                status, strain, h5["timeseries/strain"][()], params.get("jam_intervals", 10)
+            )
+        else:  # without the time series only the arrested packing the run ended on is known jammed
+            jammed = np.zeros(count, dtype=bool)
+            if status == "jammed" and count:
+                jammed[-1] = True
+        contacts = None
+        names = ("contact_offset", "contact_pairs", "contact_state", "contact_stretch")
+        if all(name in sn for name in names):
+            offset = sn["contact_offset"][()]
+            pairs, states, stretches = (
+                sn["contact_pairs"][()],
+                sn["contact_state"][()],
+                sn["contact_stretch"][()],
+            )
+            contacts = [
+                (
+                    pairs[offset[k] : offset[k + 1]],
+                    states[offset[k] : offset[k + 1]],
+                    stretches[offset[k] : offset[k + 1]],
+                )
+                for k in range(min(count, offset.size - 1))
+            ]
+    phi, stress = float(params["phi"]), float(params["stress"])
+    check_geometry(str(path), radii, lx, ly, phi)
+    physical = {k: params[k] for k in PHYSICAL_PARAMS if k in params}
+    numerics = {k: params[k] for k in ("disp_max", "dt_max", "lagged_step_control") if k in params}
+    return Snapshots(
+        source=str(path),
+        kind="rheograph",
+        positions=positions,  # the simulator writes them wrapped
+        radii=radii,
+        lx=lx,
+        ly=ly,
+        le_offset=offsets,
+        strain=np.asarray(strain, dtype=np.float64),
+        stress=stress,
+        phi=phi,
+        params=physical,
+        targets=targets,
+        jammed=jammed,
+        numerics=numerics,
+        contacts=contacts,
+        status=status,
+    )
+
+
+# ---- bare snapshot files ---------------------------------------------------------------------------
+def _bare_values(path: Path) -> dict:
+    if path.suffix == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return {key: data[key] for key in data.files}
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{path}: not a readable .npz file ({exc})") from exc
+    with h5py.File(path, "r") as h5:
+        values = {key: h5.attrs[key] for key in h5.attrs}
+        values.update({key: h5[key][()] for key in h5 if isinstance(h5[key], h5py.Dataset)})
+        return values
+
+
+def _scalar(values: dict, key: str, where: str) -> float:
+    try:
+        value = float(np.asarray(values[key], dtype=np.float64).reshape(()))
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{where}: '{key}' must be one number") from exc
+    if not math.isfinite(value):
+        raise InputError(f"{where}: '{key}' = {value} is not finite")
+    return value
+
+
+def read_bare(path: str | Path) -> Snapshots:
+    """A bare snapshot file (module docstring lists its keys)."""
+    return snapshots_from_values(_bare_values(Path(path)), str(path), kind="bare")
+
+
+def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snapshots:
+    """``Snapshots`` from the keys of a bare snapshot file (module docstring), checked; ``where`` names
+    the source in messages."""
+    required = ("positions", "radii", "box", "le_offset", "stress", "phi", *BARE_REQUIRED_PARAMS)
+    missing = [key for key in required if key not in values]
+    if missing:
+        raise InputError(
+            f"{where}: missing key(s) {missing}; a bare snapshot file needs {list(required)} "
+            "(docs/data_format.md, 'Bare snapshot files')"
+        )
+    positions = np.asarray(values["positions"], dtype=np.float64)
+    if positions.ndim == 2:
+        positions = positions[None]
+    radii = np.asarray(values["radii"], dtype=np.float64).reshape(-1)
+    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
+        raise InputError(
+            f"{where}: positions must be (S, N, 2) or (N, 2) with N = {radii.size} (the radii), "
+            f"found {positions.shape}"
+        )
+    if not np.all(np.isfinite(positions)):
+        raise InputError(f"{where}: positions contain non-finite values")
+    n_snap = positions.shape[0]
+    box = np.asarray(values["box"], dtype=np.float64).reshape(-1)
+    if box.size != 2:
+        raise InputError(f"{where}: box must be (Lx, Ly), found {box.size} value(s)")
+    lx, ly = float(box[0]), float(box[1])
+    offsets = np.asarray(values["le_offset"], dtype=np.float64).reshape(-1)
+    if offsets.size == 1:
+        offsets = np.full(n_snap, offsets[0])
+    if offsets.size != n_snap or not np.all(np.isfinite(offsets)):
+        raise InputError(f"{where}: le_offset must be one number or (S,) = ({n_snap},) finite numbers")
+    stress, phi = _scalar(values, "stress", where), _scalar(values, "phi", where)
+    if stress <= 0:
+        raise InputError(f"{where}: stress = {stress:g} must be > 0 (σ/σ0)")
+    check_geometry(where, radii, lx, ly, phi)
+    params = {key: _scalar(values, key, where) for key in PHYSICAL_PARAMS if key in values}
+    measured_ratio = _size_ratio(radii)
+    if "size_ratio" in params and not math.isclose(params["size_ratio"], measured_ratio, rel_tol=1e-5):
+        raise InputError(
+            f"{where}: size_ratio = {params['size_ratio']:g} but the radii give {measured_ratio:g}"
+        )
+    params["size_ratio"] = measured_ratio
+    if params.setdefault("critical_load", 1.0) != 1.0:
+        raise InputError(f"{where}: critical_load must be 1 (F_CL is the unit of force and stress)")
+
+    def series(key):
+        if key not in values:
+            return np.full(n_snap, np.nan)
+        out = np.asarray(values[key], dtype=np.float64).reshape(-1)
+        if out.size != n_snap:
+            raise InputError(f"{where}: '{key}' needs one value per snapshot ({n_snap}), found {out.size}")
+        return out
+
+    noise = _scalar(values, "position_noise", where) if "position_noise" in values else 0.0
+    if noise < 0:
+        raise InputError(f"{where}: position_noise = {noise:g} must be >= 0 (units of a)")
+    numerics = {"disp_max": _scalar(values, "disp_max", where)} if "disp_max" in values else {}
+    return Snapshots(
+        source=where,
+        kind=kind,
+        positions=np.stack([wrap_into_box(p, lx, ly, o) for p, o in zip(positions, offsets)]),
+        radii=radii,
+        lx=lx,
+        ly=ly,
+        le_offset=offsets,
+        strain=series("strain"),
+        stress=stress,
+        phi=phi,
+        params=params,
+        targets=np.stack([series(key) for key in TARGET_KEYS], axis=1),
+        jammed=np.zeros(n_snap, dtype=bool),
+        numerics=numerics,
+        position_noise=noise,
+    )
+
+
+def write_bare(path: str | Path, snapshots: Snapshots) -> None:
+    """Write ``snapshots`` as a bare ``.npz`` file (for exchanging configurations; targets where known)."""
+    values = {
+        "positions": snapshots.positions,
+        "radii": snapshots.radii,
+        "box": np.array([snapshots.lx, snapshots.ly]),
+        "le_offset": snapshots.le_offset,
+        "stress": snapshots.stress,
+        "phi": snapshots.phi,
+        "strain": snapshots.strain,
+        "position_noise": snapshots.position_noise,
+        **{k: v for k, v in snapshots.params.items()},
+        **{key: snapshots.targets[:, k] for k, key in enumerate(TARGET_KEYS)},
+        **snapshots.numerics,
+    }
+    np.savez(path, **values)
+
+
+# ---- dispatch --------------------------------------------------------------------------------------
+def source_kind(path: str | Path) -> str:
+    """``rheograph``, ``bare`` or ``lfdem`` for a snapshot source (by its name and content)."""
+    path = Path(path)
+    name = path.name
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    if name.startswith("par_") and (name.endswith(".dat") or name.endswith(".dat.gz")):
+        return "lfdem"
+    if path.suffix == ".npz":
+        return "bare"
+    if h5py.is_hdf5(path):
+        try:
+            with h5py.File(path, "r") as h5:
+                return "rheograph" if "snapshots" in h5 else "bare"
+        except OSError:  # held by a running simulation: only trajectories are written that way
+            return "rheograph"
+    from rheograph.io.hdf5 import last_checkpoint_copy
+
+    if last_checkpoint_copy(path).exists():  # damaged mid-write; its copy is readable
+        return "rheograph"
+    raise InputError(
+        f"{path}: not a snapshot source: expected a rheograph trajectory (.h5), a bare snapshot file "
+        "(.npz or HDF5 with positions, radii, box, ...) or an LF_DEM par_*.dat[.gz]"
+    )
+
+
+def read_snapshots(path: str | Path, lfdem_params: str | Path | None = None) -> Snapshots:
+    """The snapshots of any source (module docstring); ``lfdem_params``: LF_DEM's parameter file, for
+    LF_DEM runs (``rheograph.io.lfdem.read_lfdem``)."""
+    kind = source_kind(path)
+    if kind == "lfdem":
+        from rheograph.io.lfdem import read_lfdem
+
+        return read_lfdem(path, lfdem_params)
+    if lfdem_params is not None:
+        raise InputError(f"{path}: an LF_DEM parameter file was given, but this is not an LF_DEM par_*.dat")
+    return read_trajectory(path) if kind == "rheograph" else read_bare(path)

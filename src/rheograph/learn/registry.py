@@ -1,0 +1,218 @@
+"""Shipped surrogate models: named ensembles of fold bundles with a model card, inside the package
+(``rheograph/models/<name>/``: ``fold*.pt``, ``error_model.json``, ``card.json``, ``card.md``).
+
+    python -m rheograph.learn.registry ship docs/results/surrogate_per_phi/N400_phi0.76 --name N400_phi0.76
+    python predict.py --list-models
+
+``ship`` makes a named model out of a training run directory: its fold bundles, completed where a run of
+an older version lacks them with the physical parameters and the one-solve step of its training data
+(read from the trajectories its split files list), its error model, and a card written from its
+``metrics.json``: training data, protocol, held-out scores beside the physics-only rows and the
+baselines, the trained domain, the parameters a snapshot must carry, and what is computed from physics
+versus learned.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import shutil
+from pathlib import Path
+
+import torch
+
+from rheograph.errors import InputError
+from rheograph.learn.datamodule import suspension_record
+
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+
+
+def list_models() -> list[str]:
+    if not MODELS_DIR.is_dir():
+        return []
+    return sorted(p.name for p in MODELS_DIR.iterdir() if (p / "card.json").is_file())
+
+
+def model_paths(name_or_path: str | Path) -> tuple[list[Path], str]:
+    """(fold bundles, label) of a shipped model name, a training run directory or one bundle file."""
+    text = str(name_or_path)
+    if text in list_models():
+        directory = MODELS_DIR / text
+        return sorted(directory.glob("fold*.pt")), text
+    path = Path(text)
+    if path.is_file():
+        return [path], str(path)
+    if path.is_dir():
+        bundles = sorted(path.glob("fold*.pt"))
+        if not bundles:
+            raise InputError(f"--models {path}: a directory without fold*.pt bundles (a training run?)")
+        return bundles, str(path)
+    shipped = ", ".join(list_models()) or "none installed"
+    raise InputError(
+        f"--models {text}: neither a shipped model ({shipped}) nor a training run directory or bundle"
+    )
+
+
+def read_card(paths: list[Path]) -> dict | None:
+    card = paths[0].parent / "card.json"
+    return json.loads(card.read_text()) if card.is_file() else None
+
+
+# ---- making a shipped model ----------------------------------------------------------------------
+def _complete_bundle(bundle: dict, split_file: Path) -> dict:
+    """A bundle with the suspension record of its training data (bundles of older runs lack it): the
+    split file lists every run of the training run's dataset, one suspension."""
+    domain = bundle["domain"]
+    if "physical_params" in domain and "solve_numerics" in domain:
+        return bundle
+    files = json.loads(split_file.read_text())["files"]
+    return {**bundle, "domain": {**domain, **suspension_record(files)}}
+
+
+def _score_rows(metrics: dict) -> list[dict]:
+    mean = metrics["mean"]
+    rows = [("graph network", "test/")]
+    rows += [(name, f"baseline/{name}/") for name in ("stress_mean", "descriptors", "descriptors_solve")]
+    rows += [
+        (name, f"physics/{name}/")
+        for name in ("counted_z_mu", "spring_pressure", "solve_eta", "solve_eta_offset")
+    ]
+    out = []
+    for label, prefix in rows:
+        scores = {
+            target: mean.get(f"{prefix}r2_{scale}{target}")
+            for target, scale in (("eta", "log_"), ("pressure", "log_"), ("z_mu", ""))
+        }
+        if any(v is not None for v in scores.values()):
+            out.append({"model": label, **scores})
+    return out
+
+
+def _relative(path: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def write_card(directory: Path, name: str, run_dir: Path, bundle: dict) -> dict:
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    domain, graph = bundle["domain"], bundle["graph"]
+    card = {
+        "name": name,
+        "trained_from": _relative(run_dir),
+        "split": metrics.get("split"),
+        "folds": len(metrics["folds"]),
+        "graph": graph,
+        "domain": {k: domain[k] for k in ("phi", "stress", "n_particles", "size_ratio")},
+        "physical_params": domain["physical_params"],
+        "solve_numerics": domain["solve_numerics"],
+        "position_noise": domain.get("position_noise", 0.0),
+        "held_out_r2": _score_rows(metrics),
+    }
+    (directory / "card.json").write_text(json.dumps(card, indent=1))
+    (directory / "card.md").write_text(card_markdown(card))
+    return card
+
+
+def card_markdown(card: dict) -> str:
+    d = card["domain"]
+    computed = [
+        x for x in card["graph"]["graph_inputs"] if x in ("solve_viscosity", "frictional_coordination")
+    ]
+    lines = [
+        f"# Model card: {card['name']}",
+        "",
+        f"Ensemble of {card['folds']} fold models (ResGCN) trained by `train.py` on rheograph simulations "
+        f"(split: {card['split']}; held-out scores are on test folds the fold models never saw).",
+        "",
+        "## Trained domain",
+        f"* φ {d['phi'][0]:g}–{d['phi'][1]:g}, σ/σ0 {d['stress'][0]:g}–{d['stress'][1]:g}, "
+        f"N {d['n_particles']}, "
+        f"size ratio {d['size_ratio']}; positions exact to 1e-7 a (simulator output), position noise "
+        f"{card['position_noise']:g} a.",
+        "* A snapshot must carry these physical parameters, equal to the model's (refused otherwise): "
+        + ", ".join(f"`{k}` = {v:g}" for k, v in card["physical_params"].items()),
+        "* The one-solve input is computed with the model's own step: "
+        + "; ".join(f"φ {e['phi']:g}: disp_max {e['disp_max']:g}" for e in card["solve_numerics"]),
+        "",
+        "## What is computed from physics and what is learned",
+        "* Edge features: "
+        + ", ".join(f"`{x}`" for x in card["graph"]["edge_features"])
+        + " (from positions, radii, box, "
+        "and the imposed stress).",
+    ]
+    if computed:
+        lines.append(
+            "* Computed graph inputs: "
+            + ", ".join(f"`{x}`" for x in computed)
+            + " — the η_r of one resistance solve at the imposed stress and the CLM's frictional "
+            "contacts counted"
+            + (" (Z_μ is learned as a correction to the count)" if card["graph"].get("z_mu_on_count") else "")
+            + (
+                " (η_r is learned as a correction to the one-solve value)"
+                if card["graph"].get("viscosity_on_solve")
+                else ""
+            )
+            + "."
+        )
+    lines += [
+        "* Learned: the message-passing network and its head (η_r, Π, Z_μ).",
+        "",
+        "## Held-out R² (mean over folds)",
+        "",
+        "| model | R² log η_r | R² log Π | R² Z_μ |",
+        "|---|---|---|---|",
+    ]
+
+    def fmt(v):
+        return "–" if v is None else f"{v:.4f}"
+
+    for row in card["held_out_r2"]:
+        lines.append(f"| {row['model']} | {fmt(row['eta'])} | {fmt(row['pressure'])} | {fmt(row['z_mu'])} |")
+    lines += ["", f"Trained in `{card['trained_from']}`."]
+    return "\n".join(lines) + "\n"
+
+
+def ship(run_dir: str | Path, name: str) -> Path:
+    run_dir = Path(run_dir)
+    bundles = sorted(run_dir.glob("fold*.pt"))
+    if not bundles:
+        raise InputError(f"{run_dir}: no fold*.pt bundles")
+    directory = MODELS_DIR / name
+    directory.mkdir(parents=True, exist_ok=True)
+    first = None
+    for path in bundles:
+        bundle = torch.load(path, map_location="cpu", weights_only=True)
+        bundle = _complete_bundle(bundle, path.with_name(path.stem + "_split.json"))
+        buffer = io.BytesIO()
+        torch.save(bundle, buffer)
+        (directory / path.name).write_bytes(buffer.getvalue())
+        first = first or bundle
+    if (run_dir / "error_model.json").is_file():
+        shutil.copy(run_dir / "error_model.json", directory / "error_model.json")
+    write_card(directory, name, run_dir, first)
+    return directory
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("ship", help="make a named model of a training run directory")
+    s.add_argument("run_dir")
+    s.add_argument("--name", required=True)
+    sub.add_parser("list", help="the shipped models")
+    args = ap.parse_args(argv)
+    if args.command == "ship":
+        print(ship(args.run_dir, args.name))
+    else:
+        for name in list_models():
+            print(name)
+
+
+if __name__ == "__main__":
+    from rheograph.errors import one_line_errors
+
+    with one_line_errors("rheograph.learn.registry"):
+        main()

@@ -1,0 +1,361 @@
+"""Snapshots from anywhere: bare files, LF_DEM runs, rheograph trajectories (finished, running, stripped),
+the Python API, shipped models, and one line for every bad input."""
+
+import gzip
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from rheograph.errors import InputError
+from rheograph.io.snapshots import read_snapshots, write_bare
+
+ROOT = Path(__file__).resolve().parents[1]
+LFDEM = ROOT / "tests" / "data" / "lfdem_run_small"
+PAR = LFDEM / "par_conf_params_stress10cl_shear.dat"
+PHYSICAL = dict(mu=0.5, kn_coefficient=2e4, kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5)
+
+
+@pytest.fixture(scope="module")
+def model():
+    import rheograph
+
+    return rheograph.load_model("N400_phi0.76")
+
+
+def _bare_values(path):
+    with np.load(path) as data:
+        return {k: data[k] for k in data.files}
+
+
+# ---- readers ---------------------------------------------------------------------------------------
+def test_bare_file_round_trips_a_trajectory(tiny_files, tmp_path):
+    snaps = read_snapshots(tiny_files[1])
+    write_bare(tmp_path / "s.npz", snaps)
+    bare = read_snapshots(tmp_path / "s.npz")
+    assert bare.kind == "bare" and len(bare) == len(snaps)
+    np.testing.assert_array_equal(bare.positions, snaps.positions)
+    np.testing.assert_array_equal(bare.targets, snaps.targets)
+    assert bare.params == snaps.params and bare.stress == snaps.stress
+    # the same keys in HDF5 read the same
+    with h5py.File(tmp_path / "s.h5", "w") as h5:
+        for key, value in _bare_values(tmp_path / "s.npz").items():
+            if np.ndim(value):
+                h5[key] = value
+            else:
+                h5.attrs[key] = value
+    from_h5 = read_snapshots(tmp_path / "s.h5")
+    np.testing.assert_array_equal(from_h5.positions, snaps.positions)
+
+
+def test_bare_positions_anywhere_are_wrapped_with_the_lees_edwards_images(tiny_files, tmp_path):
+    """A periodic image of a particle (one box up: x shifted by the offset) is the same configuration."""
+    from rheograph.graphs.features import snapshot_pairs
+
+    snaps = read_snapshots(tiny_files[2])
+    values = {
+        "positions": snaps.positions[-1].copy(),
+        "radii": snaps.radii,
+        "box": [snaps.lx, snaps.ly],
+        "le_offset": snaps.le_offset[-1],
+        "stress": snaps.stress,
+        "phi": snaps.phi,
+        **PHYSICAL,
+    }
+    values["positions"][::3] += [snaps.le_offset[-1], snaps.ly]  # image above
+    values["positions"][1::3] += [3 * snaps.lx, 0.0]
+    np.savez(tmp_path / "moved.npz", **values)
+    moved = read_snapshots(tmp_path / "moved.npz")
+    p = snaps.graph_params()
+    a = snapshot_pairs(snaps.positions[-1], snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[-1], 0.5, p)
+    b = snapshot_pairs(moved.positions[0], moved.radii, moved.lx, moved.ly, moved.le_offset[0], 0.5, p)
+    order_a, order_b = np.lexsort((a["j"], a["i"])), np.lexsort((b["j"], b["i"]))
+    np.testing.assert_array_equal(a["i"][order_a], b["i"][order_b])
+    np.testing.assert_allclose(a["xi"][order_a], b["xi"][order_b], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda v: v.pop("mu"), r"missing key\(s\) \['mu'\]"),
+        (lambda v: v.pop("box"), r"missing key\(s\) \['box'\]"),
+        (lambda v: v.update(phi=0.7), "area fraction"),
+        (lambda v: v.update(radii=v["radii"] * 2), "units of the small radius"),
+        (lambda v: v.update(positions=v["positions"][:, :10]), "positions must be"),
+        (lambda v: v.update(stress=-1.0), "stress"),
+        (lambda v: v.update(eta_r=np.ones(3)), "'eta_r' needs one value per snapshot"),
+        (lambda v: v.update(critical_load=2.0), "critical_load"),
+    ],
+)
+def test_bare_file_errors_name_the_key(tiny_files, tmp_path, change, message):
+    write_bare(tmp_path / "s.npz", read_snapshots(tiny_files[0]))
+    values = _bare_values(tmp_path / "s.npz")
+    change(values)
+    np.savez(tmp_path / "bad.npz", **values)
+    with pytest.raises(InputError, match=message):
+        read_snapshots(tmp_path / "bad.npz")
+
+
+def test_foreign_and_missing_files_are_refused_by_name(tmp_path):
+    (tmp_path / "notes.txt").write_text("hello")
+    with pytest.raises(InputError, match="not a snapshot source"):
+        read_snapshots(tmp_path / "notes.txt")
+    (tmp_path / "fake.npz").write_text("not a zip")
+    with pytest.raises(InputError, match="not a readable .npz"):
+        read_snapshots(tmp_path / "fake.npz")
+    with h5py.File(tmp_path / "other.h5", "w") as h5:
+        h5["data"] = np.zeros(3)
+    with pytest.raises(InputError, match="missing key"):
+        read_snapshots(tmp_path / "other.h5")
+    with pytest.raises(InputError, match="no such file"):
+        read_snapshots(tmp_path / "absent.h5")
+
+
+def test_trajectory_without_time_series_or_parameters(tiny_files, tmp_path):
+    stripped = tmp_path / "stripped.h5"
+    shutil.copy(tiny_files[1], stripped)
+    with h5py.File(stripped, "r+") as h5:
+        del h5["timeseries"]
+        params = json.loads(h5.attrs["params"])
+        del params["kn_coefficient"]
+        h5.attrs["params"] = json.dumps(params)
+    snaps = read_snapshots(stripped)
+    assert len(snaps) == len(read_snapshots(tiny_files[1])) and not snaps.jammed.any()
+    assert "kn_coefficient" in snaps.missing_params()
+
+
+def test_running_trajectory_is_read_from_its_last_checkpoint_copy(tiny_files, tmp_path):
+    """A simulation holds its file (HDF5 lock): the reader takes the copy as of the last checkpoint."""
+    from rheograph.io.hdf5 import last_checkpoint_copy
+
+    running = tmp_path / "trajectory.h5"
+    shutil.copy(tiny_files[1], running)
+    shutil.copy(tiny_files[1], last_checkpoint_copy(running))
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            f"import h5py, time; f = h5py.File({str(running)!r}, 'r+'); print(1, flush=True); time.sleep(60)",
+        ],
+        stdout=subprocess.PIPE,
+    )
+    try:
+        holder.stdout.readline()
+        with pytest.raises(OSError):
+            h5py.File(running, "r")  # locked: the test is meaningful
+        snaps = read_snapshots(running)
+    finally:
+        holder.kill()
+    assert len(snaps) == len(read_snapshots(tiny_files[1]))
+
+
+# ---- LF_DEM -------------------------------------------------------------------------------------------
+def test_lfdem_run_is_read_in_rheograph_conventions(tmp_path):
+    from rheograph.graphs.features import snapshot_pairs
+    from rheograph.io.lfdem import _data_table
+
+    snaps = read_snapshots(PAR)
+    assert snaps.kind == "lfdem" and len(snaps) == 7 and snaps.n_particles == 100
+    assert snaps.stress == 10.0 and snaps.phi == pytest.approx(0.76, abs=1e-6)
+    # parameters from the copy LF_DEM keeps in input_*.dat; kn checked against the data file's column
+    assert snaps.params == {**PHYSICAL, "critical_load": 1.0, "size_ratio": 1.4}
+    assert snaps.numerics == {"disp_max": 1e-3}
+    np.testing.assert_allclose(snaps.strain, np.arange(7) * 0.05, atol=1e-12)
+    # the shear displacement is the Lees-Edwards offset gamma * Ly (wrapped)
+    np.testing.assert_allclose(
+        snaps.le_offset,
+        snaps.strain * snaps.ly - snaps.lx * np.round(snaps.strain * snaps.ly / snaps.lx),
+        atol=1e-4,
+    )
+    columns, table = _data_table(LFDEM / "data_conf_params_stress10cl_shear.dat")
+    rows = [int(np.argmin(np.abs(table[:, 1] - g))) for g in snaps.strain]
+    # eta_r = sigma / shear rate of the configuration: LF_DEM's own viscosity column, both from 6-digit
+    # numbers (rounding up to 5e-6 each)
+    np.testing.assert_allclose(snaps.targets[:, 0], table[rows, columns["viscosity"]], rtol=1e-5)
+    np.testing.assert_allclose(snaps.targets[:, 1], table[rows, columns["particle pressure"]], rtol=1e-12)
+    # Z_mu counted from int_*.dat's contact states equals LF_DEM's frictional contact number
+    np.testing.assert_allclose(
+        snaps.targets[:, 2], table[rows, columns["frictional contact number"]], atol=1e-9
+    )
+    for k in range(len(snaps)):
+        pairs = snapshot_pairs(
+            snaps.positions[k], snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k], 0.5, snaps.graph_params()
+        )
+        # a wrong Lees-Edwards sign or box would put O(1) overlaps across the boundary; 6-digit
+        # positions move a contact count by a few
+        assert pairs["xi"].min() > -0.005
+        contacts = 2 * (pairs["xi"] < 0).sum() / snaps.n_particles
+        assert contacts == pytest.approx(table[rows[k], columns["contact number"]], abs=0.05)
+    assert 0 < snaps.position_noise < 3e-5
+
+
+def test_lfdem_gzip_and_explicit_parameter_file_read_alike(tmp_path):
+    for f in LFDEM.glob("*_conf_params_stress10cl_shear.dat"):
+        if f.name.startswith(("par_", "int_")):
+            with gzip.open(tmp_path / (f.name + ".gz"), "wt") as out:
+                out.write(f.read_text())
+        elif not f.name.startswith("input_"):
+            shutil.copy(f, tmp_path / f.name)
+    par = tmp_path / (PAR.name + ".gz")
+    with pytest.raises(InputError, match="LF_DEM's parameters are needed"):
+        read_snapshots(par)  # no input_*.dat beside and no parameter file
+    snaps = read_snapshots(par, LFDEM / "params.txt")
+    np.testing.assert_array_equal(snaps.positions, read_snapshots(PAR).positions)
+    np.testing.assert_array_equal(snaps.targets, read_snapshots(PAR).targets)
+    other = tmp_path / "params.txt"
+    other.write_text((LFDEM / "params.txt").read_text().replace("friction_model = 2", "friction_model = 5"))
+    with pytest.raises(InputError, match="friction_model = 5"):
+        read_snapshots(par, other)
+    other.write_text((LFDEM / "params.txt").read_text().replace("kn = 20000s", "kn = 30000s"))
+    with pytest.raises(InputError, match="is this the parameter file of this run"):
+        read_snapshots(par, other)
+
+
+def test_lfdem_par_file_still_being_written_drops_its_partial_block(tmp_path):
+    lines = PAR.read_text().splitlines()
+    (tmp_path / PAR.name).write_text("\n".join(lines[: len(lines) - 30]) + "\n")
+    shutil.copy(LFDEM / "input_conf_params_stress10cl_shear.dat", tmp_path)
+    assert len(read_snapshots(tmp_path / PAR.name)) == 6
+
+
+def test_graph_dataset_and_suspension_record_take_lfdem_runs(tmp_path):
+    from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
+    from rheograph.graphs.features import PHYSICS_EDGE_FEATURES
+    from rheograph.learn.datamodule import suspension_record
+
+    settings = GraphSettings(edge_features=PHYSICS_EDGE_FEATURES, min_strain=0.05)
+    dataset = SnapshotGraphDataset([PAR], settings, tmp_path / "cache")
+    snaps = read_snapshots(PAR)
+    assert len(dataset) == 6  # strain >= 0.05
+    np.testing.assert_allclose(dataset.y_raw.numpy(), snaps.targets[1:])
+    record = suspension_record([str(PAR)])
+    assert record["physical_params"]["kn_coefficient"] == 2e4
+    assert record["solve_numerics"] == [
+        {"phi": 0.76, "n_particles": 100, "disp_max": 1e-3, "dt_max": 1.0, "lagged_step_control": False}
+    ]
+
+
+# ---- models and the Python API --------------------------------------------------------------------
+def test_shipped_models_are_listed_with_cards():
+    import rheograph
+
+    names = rheograph.list_models()
+    for name in ("N400_phi0.76", "N2000_phi0.80", "pooled_N400"):
+        assert name in names
+    from rheograph.learn.registry import MODELS_DIR
+
+    card = json.loads((MODELS_DIR / "N400_phi0.76" / "card.json").read_text())
+    assert card["physical_params"]["mu"] == 0.5 and card["solve_numerics"][0]["disp_max"] == 2e-3
+    assert "graph network" in [row["model"] for row in card["held_out_r2"]]
+
+
+def test_prediction_of_a_trajectory_equals_that_of_its_bare_copy(model, tiny_files, tmp_path):
+    snaps = read_snapshots(tiny_files[2])
+    write_bare(tmp_path / "s.npz", snaps)
+    a = model.predict_snapshots(snaps)
+    b = model.predict_snapshots(read_snapshots(tmp_path / "s.npz"))
+    for column in ("eta_pred", "pressure_pred", "z_mu_pred", "eta_sim", "in_domain"):
+        np.testing.assert_array_equal(a[column], b[column])
+    # the tiny runs have N = 64 and phi = 0.72: predicted, and flagged with the reason
+    assert not a["in_domain"].any() and "N = 64" in a["notes"][0] and "phi = 0.72" in a["notes"][0]
+
+
+def test_snapshot_without_targets_and_parameter_checks(model, tiny_files, tmp_path):
+    snaps = read_snapshots(tiny_files[2])
+    bare = {
+        "positions": snaps.positions,
+        "radii": snaps.radii,
+        "box": [snaps.lx, snaps.ly],
+        "le_offset": snaps.le_offset,
+        "stress": snaps.stress,
+        "phi": snaps.phi,
+    }
+    table = model.predict(**bare, **PHYSICAL)
+    assert np.isnan(table["eta_sim"]).all() and np.isfinite(table["eta_pred"]).all()
+    assert len(table["eta_pred"]) == len(snaps)
+    with pytest.raises(InputError, match=r"\['kt_ratio'\] are not given.*kt_ratio=0.5"):
+        model.predict_snapshots(read_snapshots_without(tmp_path, snaps, "kt_ratio"))
+    with pytest.raises(InputError, match=r"mu = 1 \(model: 0.5\)"):
+        model.predict(**bare, **{**PHYSICAL, "mu": 1.0})
+    accepted = model.predict(**bare, **{**PHYSICAL, "mu": 1.0}, accept_mismatch=True)
+    assert not accepted["in_domain"].any() and "accepted parameter mismatch: mu = 1" in accepted["notes"][0]
+    with pytest.raises(InputError, match="unknown keyword"):
+        model.predict(**bare, **PHYSICAL, colour=1)
+
+
+def read_snapshots_without(tmp_path, snaps, key):
+    """A trajectory-layout file of ``snaps`` whose params lack ``key``."""
+    path = tmp_path / f"without_{key}.h5"
+    with h5py.File(path, "w") as h5:
+        params = {**snaps.params, "stress": snaps.stress, "phi": snaps.phi}
+        del params[key]
+        h5.attrs["params"] = json.dumps(params)
+        h5.attrs["lx"], h5.attrs["ly"] = snaps.lx, snaps.ly
+        h5["radii"] = snaps.radii
+        h5["snapshots/positions"] = snaps.positions
+        h5["snapshots/le_offset"] = snaps.le_offset
+    return read_snapshots(path)
+
+
+def test_readme_python_example_runs(monkeypatch):
+    """The README's Python example, as written (between its python-example markers), from the root."""
+    monkeypatch.chdir(ROOT)
+    text = (ROOT / "README.md").read_text()
+    match = re.search(r"<!-- python-example -->\s*```python\n(.*?)```", text, flags=re.S)
+    assert match, "README lost its python-example block"
+    namespace = {}
+    exec(compile(match.group(1), "README.md", "exec"), namespace)
+    table = namespace["table"]
+    assert np.isfinite(table["eta_pred"]).all() and len(table["eta_pred"]) >= 1
+
+
+def test_predict_cli_reads_all_kinds_and_bad_input_is_one_line(tiny_files, tmp_path):
+    write_bare(tmp_path / "s.npz", read_snapshots(tiny_files[0]))
+    out = tmp_path / "p.csv"
+    cmd = [sys.executable, str(ROOT / "predict.py"), "--models", "N400_phi0.76", "--out", str(out), "--input"]
+    done = subprocess.run(
+        [*cmd, tiny_files[0], str(tmp_path / "s.npz"), str(PAR)], capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in out.read_text().splitlines() if not line.startswith("#")]
+    header = lines[0].split(",")
+    for column in (
+        "strain",
+        "stress",
+        "phi",
+        "in_domain",
+        "eta_pred",
+        "pressure_pred",
+        "z_mu_pred",
+        "eta_pred_std",
+        "eta_pred_err",
+        "eta_sim",
+    ):
+        assert column in header
+    n = len(read_snapshots(tiny_files[0]))
+    assert len(lines) - 1 == 2 * n + 7
+    (tmp_path / "notes.txt").write_text("x")
+    for bad in (
+        [*cmd, str(tmp_path / "notes.txt")],
+        [*cmd, str(PAR), "--param", "colour=1"],
+        [
+            sys.executable,
+            str(ROOT / "predict.py"),
+            "--models",
+            "nonesuch",
+            "--input",
+            str(PAR),
+            "--out",
+            str(out),
+        ],
+    ):
+        done = subprocess.run(bad, capture_output=True, text=True)
+        assert done.returncode != 0
+        assert "Traceback" not in done.stderr and done.stderr.strip().count("\n") == 0, done.stderr
+        assert "predict.py: error:" in done.stderr
