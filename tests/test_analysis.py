@@ -67,7 +67,7 @@ def test_block_standard_error_of_uncorrelated_rows_is_the_textbook_one():
     assert np.mean(ratios) == pytest.approx(1.0, rel=0.15)
 
 
-def test_flow_curve_report_pools_seeds_and_flags_states(tiny_files, tmp_path):
+def test_flow_curve_report_of_three_stresses_is_shear_thickening(tiny_files, tmp_path):
     from rheograph.flowcurve import main
 
     main([str(Path(tiny_files[0]).parent), "--out", str(tmp_path)])
@@ -78,6 +78,46 @@ def test_flow_curve_report_pools_seeds_and_flags_states(tiny_files, tmp_path):
     # eta_r grows with stress (shear thickening) in the tiny runs too
     etas = [float(r.split("|")[8].split("±")[0]) for r in rows]
     assert etas == sorted(etas)
+
+
+def test_flow_curve_pools_the_seeds_of_a_state_point_and_flags_an_unfinished_run(tmp_path):
+    """Three seeds of one state point: one value, their mean, with the error the larger of the seeds'
+    spread / sqrt(3) and the propagated block errors; a run stopped by its wall-clock limit is pooled and
+    its status listed."""
+    import h5py
+
+    from rheograph.analysis import steady_state_summary
+    from rheograph.flowcurve import collect, markdown_table
+    from rheograph.io.hdf5 import read_timeseries
+    from rheograph.runner import run_state_point
+    from rheograph.sim.params import SimParams
+
+    summaries = []
+    for seed in (1, 2, 3):
+        params = SimParams(
+            n_particles=64, phi=0.72, stress=5.0, seed=seed, strain=0.3, snapshot_interval=0.1,
+            steady_state_strain=0.05, disp_max=2e-3, integrator="implicit",
+        )  # fmt: skip
+        path = tmp_path / f"seed{seed}.h5"
+        run_state_point(params, path, progress=False)
+        if seed == 3:  # as a run ended by sim.max_wall_seconds leaves it
+            with h5py.File(path, "r+") as h5:
+                h5.attrs["status"] = "wall_limit"
+        ts = read_timeseries(path)
+        summaries.append(
+            steady_state_summary(ts["strain"], ts["time"], ts["pressure"], ts["z_mu"], ts["z"], 5.0, 0.05)
+        )
+    (point,) = collect([tmp_path])
+    assert point["n_seeds"] == 3 and point["statuses"] == ["completed", "wall_limit"]
+    for key in ("viscosity", "pressure", "z_mu"):
+        values = np.array([s[key] for s in summaries])
+        errors = np.array([s[key + "_se"] for s in summaries])
+        assert len(set(values.round(9))) == 3  # independent seeds: a real pooling, not one run thrice
+        assert point[key] == pytest.approx(values.mean(), rel=1e-12)
+        expected = max(values.std(ddof=1) / np.sqrt(3), np.sqrt((errors**2).sum()) / 3)
+        assert point[key + "_se"] == pytest.approx(expected, rel=1e-12)
+    (row,) = [line for line in markdown_table([point]).splitlines() if line.startswith("| 64 |")]
+    assert row.rstrip().endswith("completed,wall_limit |") and "| 3 |" in row
 
 
 def test_reference_steps_per_strain_from_the_mean_dt_column(tmp_path):

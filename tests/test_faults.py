@@ -363,3 +363,8 @@ def test_a_write_finding_no_room_ends_any_entry_point_with_one_line():
     with pytest.raises(FileNotFoundError):
         with one_line_errors("train.py"):
             raise FileNotFoundError(errno.ENOENT, "No such file or directory", "/runs/x")
+
+
+def test_tune_with_a_bad_storage_url_is_one_line(tmp_path):
+    code, out = run([str(ROOT / "tune.py"), "tune.storage=notadb://x", f"output_root={tmp_path}"], tmp_path)
+    assert_one_line_error(code, out, "tune.py: error:", "tune.storage='notadb://x'", "database URL")

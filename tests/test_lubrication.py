@@ -252,3 +252,120 @@ def test_shear_resistance_closed_form(ai, aj):
     expected = (4 / 15) * ai * lam * (2 + lam + 2 * lam**2) / (1 + lam) ** 3 * ell
     assert coeff[YA] == pytest.approx(expected, rel=1e-12)
     assert coeff[YA + 1] == pytest.approx(-expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("ai, aj", RADII)
+def test_contact_block_stiffness_modes_closed_form(ai, aj):
+    """The implicit springs add dt k_n g_n g_n^T + dt k_t g_t g_t^T to the contact block, g_n the relative
+    normal displacement and g_t the sliding displacement per unit generalised velocity: two modes with
+    eigenvalues 2 k_n (|g_n|^2 = 2) and k_t (2 + a_i^2 + a_j^2) (|g_t|^2), on exactly those vectors; the
+    other four modes are the dashpot's alone.  A swapped or mis-scaled k_n / k_t fails."""
+    coeff, _, _ = coefficients(ai, aj, -0.001)
+    nx, ny = unit(0.7)
+    k_normal, k_tangential = 5.0, 2.0
+    base = pair_block(coeff, nx, ny, np.empty((6, 6)))
+    diff = contact_block(coeff, nx, ny, ai, aj, k_normal, k_tangential, np.empty((6, 6))) - base
+    eig = np.sort(np.linalg.eigvalsh(diff))
+    expected = np.sort([2.0 * k_normal, k_tangential * (2.0 + ai**2 + aj**2)])
+    np.testing.assert_allclose(eig[-2:], expected, rtol=1e-12)
+    assert np.abs(eig[:4]).max() < 1e-12
+    g_n = np.array([-nx, -ny, 0.0, nx, ny, 0.0])
+    g_t = np.array([ny, -nx, -ai, -ny, nx, -aj])  # t = (-n_y, n_x): -t on i, +t on j, -a omega on both
+    np.testing.assert_allclose(diff @ g_n, 2.0 * k_normal * g_n, atol=1e-12)
+    np.testing.assert_allclose(diff @ g_t, k_tangential * (g_t @ g_t) * g_t, atol=1e-12)
+
+
+def test_implicit_stiffness_is_the_step_times_the_spring_constants():
+    """The integrator puts dt k_n a_bar into every contact and dt k_t a_bar into sticking contacts only
+    (sliding and frictionless contacts have no tangential spring to stiffen), dt the step it assumes."""
+    from conftest import sheared_frictional_problem
+
+    from rheograph.sim import contacts
+
+    sim, lp, _ = sheared_frictional_problem()
+    s, p = sim.state, sim.params
+    state = s.contact_state.copy()
+    contacts.critical_load_update(
+        s.radii, s.pair_i, s.pair_j, lp.nvec, lp.xi, s.stretch.copy(), state, p.kn, p.kt, p.mu, 1.0
+    )
+    abar = 0.5 * (s.radii[s.pair_i] + s.radii[s.pair_j])
+    touching = lp.xi <= 0
+    stick = state == contacts.STICK
+    assert touching.sum() > 20 and stick.sum() > 5 and (touching & ~stick).sum() > 0
+    np.testing.assert_allclose(lp.k_normal, np.where(touching, p.kn * abar * s.dt_assumed, 0.0), rtol=1e-14)
+    np.testing.assert_allclose(lp.k_tangential, np.where(stick, p.kt * abar * s.dt_assumed, 0.0), rtol=1e-14)
+
+
+@pytest.mark.parametrize("ai, aj", RADII)
+@pytest.mark.parametrize("xi", [-2e-3, -1e-4, 0.0, 1e-4, 1e-3, 3e-2, 0.4])
+def test_regularised_squeeze_and_shear_at_production_delta(ai, aj, xi):
+    """At the production delta = 1e-3: X^A_11 = a_i g_XA / (xi + delta) and Y^A_11 = a_i g_YA ln(1 /
+    (xi + delta)) for a gap xi >= 0, frozen at their xi = 0 values under contact (the dashpot), with
+    g_XA = 2 lambda^2 / (1 + lambda)^3, g_YA = (4/15) lambda (2 + lambda + 2 lambda^2) / (1 + lambda)^3."""
+    delta = 1e-3
+    coeff, _, _ = coefficients(ai, aj, xi, delta=delta)
+    lam = aj / ai
+    gap = max(xi, 0.0) + delta
+    assert coeff[XA] == pytest.approx(ai * 2 * lam**2 / (1 + lam) ** 3 / gap, rel=1e-13)
+    g_ya = (4 / 15) * lam * (2 + lam + 2 * lam**2) / (1 + lam) ** 3
+    assert coeff[YA] == pytest.approx(ai * g_ya * np.log(1 / gap), rel=1e-13)
+    # momentum: the force on j from squeezing is the opposite of that on i
+    assert coeff[XA + 1] == pytest.approx(-coeff[XA], rel=1e-13)
+
+
+def test_resistance_is_continuous_through_contact():
+    below, _, _ = coefficients(1.0, 1.4, -1e-12)
+    above, _, _ = coefficients(1.0, 1.4, 1e-12)
+    np.testing.assert_allclose(below, above, rtol=1e-8)
+
+
+def test_rotational_modes_at_size_ratio_1_4_match_jeffrey_onishi():
+    """Y^B, Y^C, Y^H, Y^M of a 1 : 1.4 pair against the leading log terms of Jeffrey & Onishi (1984) and
+    Jeffrey (1992), lambda = a_j / a_i, written out here independently of the kernel, in its
+    normalisation (units of 6 pi eta0: Y^B by (2/3) a^2, Y^C_11 by (4/3) a^3, Y^C_12 by (a_i + a_j)^3 / 6,
+    Y^H by (4/3) a^3, Y^M by (10/9) a^3): for both orderings of the pair (lambda = 1.4 and 1/1.4)."""
+    from rheograph.sim.lubrication import YB, YC, YH, YM
+
+    xi = 1e-3
+    for ai, aj in ((1.0, 1.4), (1.4, 1.0)):
+        lam, inv = aj / ai, ai / aj
+        coeff, _, ell = coefficients(ai, aj, xi, delta=1e-12)
+        assert ell == pytest.approx(np.log(1 / xi), rel=1e-8)
+
+        def yb(l):
+            return -(1 / 5) * l * (4 + l) / (1 + l) ** 2
+
+        def yc(l):
+            return (2 / 5) * l / (1 + l)
+
+        def yh(l):
+            return (1 / 10) * l * (2 - l) / (1 + l) ** 2
+
+        def yh12(l):
+            return (1 / 20) * l**2 * (1 + 7 * l) / (1 + l) ** 2
+
+        def ym(l):
+            return (6 / 25) * l * (1 - l + 4 * l**2) / (1 + l) ** 3
+
+        ym12 = (3 / 50) * lam**2 * (7 - 10 * lam + 7 * lam**2) / (1 + lam) ** 3
+        yc12 = (4 / 5) * lam**2 / (1 + lam) ** 4
+        expected = {
+            YB + 0: (2 / 3) * ai**2 * yb(lam),
+            YB + 1: -(2 / 3) * ai**2 * yb(lam),
+            YB + 2: (2 / 3) * aj**2 * yb(inv),
+            YB + 3: -(2 / 3) * aj**2 * yb(inv),
+            YC + 0: (4 / 3) * ai**3 * yc(lam),
+            YC + 1: (ai + aj) ** 3 / 6 * yc12,
+            YC + 3: (4 / 3) * aj**3 * yc(inv),
+            YH + 0: (4 / 3) * ai**3 * yh(lam),
+            YH + 1: (4 / 3) * ai**3 * yh12(lam),
+            YH + 2: (4 / 3) * aj**3 * yh12(inv),
+            YH + 3: (4 / 3) * aj**3 * yh(inv),
+            YM + 0: (10 / 9) * ai**3 * ym(lam),
+            YM + 1: (10 / 9) * ai**3 * ym12,
+            YM + 3: (10 / 9) * aj**3 * ym(inv),
+        }
+        for index, value in expected.items():
+            assert coeff[index] == pytest.approx(value * ell, rel=1e-12), index
+        # the (a_i + a_j)^3 / 6 normalisation and lambda^2 / (1 + lambda)^4 are symmetric in i, j
+        assert coeff[YC + 2] == coeff[YC + 1]

@@ -359,3 +359,40 @@ def test_predict_cli_reads_all_kinds_and_bad_input_is_one_line(tiny_files, tmp_p
         assert done.returncode != 0
         assert "Traceback" not in done.stderr and done.stderr.strip().count("\n") == 0, done.stderr
         assert "predict.py: error:" in done.stderr
+
+
+def test_train_py_trains_on_lfdem_runs(tmp_path):
+    """data.files takes LF_DEM par files: a model of LF_DEM's own output, whose bundle records the
+    suspension read from LF_DEM's parameters."""
+    import torch
+
+    for k in (1, 2):  # two copies of the fixture run: two trajectories for a 3-fold random split
+        (tmp_path / f"r{k}").mkdir()
+        for f in LFDEM.glob("*_conf_params_stress10cl_shear.dat"):
+            shutil.copy(f, tmp_path / f"r{k}" / f.name)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "train.py"),
+            f"data.files={tmp_path}/r*/par_*.dat",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            "data.phi=null",
+            "data.n_particles=null",
+            "data.num_folds=3",
+            "data.split=random",
+            "graph.min_strain=0.05",
+            "trainer.max_epochs=2",
+            "~logger",
+            "fold=0",
+            "trainer.enable_progress_bar=false",
+            f"hydra.run.dir={tmp_path / 'run'}",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "run" / "report.md").exists()
+    bundle = torch.load(tmp_path / "run" / "fold0.pt", weights_only=True)
+    assert bundle["domain"]["physical_params"]["kn_coefficient"] == 2e4
+    assert bundle["domain"]["solve_numerics"][0]["disp_max"] == 1e-3

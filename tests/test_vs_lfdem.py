@@ -109,3 +109,57 @@ def test_results_section_goes_before_the_surrogate_section_once(tmp_path, vs_lfd
     text = doc.read_text()
     assert text.count("<!-- vs_lfdem:start -->") == 1 and "first" not in text
     assert text.index("Notes.") < text.index("second") < text.index("## 4. Surrogate accuracy")
+
+
+REPLAY = ROOT / "tests" / "data" / "lfdem_replay" / "replay_lfdem.py"
+
+
+def test_bench_reads_checks_and_tabulates_replayed_lfdem_runs(vs_lfdem, tmp_path, capsys):
+    """The whole measurement path with LF_DEM replaced by a stand-in that replays committed output of
+    real LF_DEM runs from the configuration the bench writes (N = 100): reading its files, the same-start
+    check against rheograph's first step, the differenced steps per strain and the table."""
+    vs_lfdem.main(
+        [
+            "--lfdem", str(REPLAY), "--n", "100", "--strains", "0.02", "0.04", "--repeats", "1",
+            "--schemes", "euler-lagged", "--lfdem-disp", "2e-3", "--no-write",
+        ]
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    check = re.search(r"initial γ̇ LF_DEM ([0-9.]+) vs rheograph ([0-9.]+)", out)
+    assert check and abs(float(check[1]) / float(check[2]) - 1) < 1e-5  # LF_DEM prints 6 digits
+    rows = {
+        line.split("|")[2].strip(): line.split("|") for line in out.splitlines() if line.startswith("| 100 |")
+    }
+    # LF_DEM's t_*.dat: 24 steps to strain 0.02, 54 to 0.04 -> (54 - 24) / 0.02 = 1500 steps per strain
+    assert float(rows["LF_DEM"][6]) == pytest.approx(1500.0)
+    # rheograph with LF_DEM's discretisation takes about as many steps from the same start
+    assert float(rows["rheograph"][6]) == pytest.approx(1500.0, rel=0.1)
+    assert rows["rheograph"][9].strip() not in ("–", "")  # the CPU ratio against LF_DEM is filled in
+
+
+def test_same_start_check_refuses_another_first_shear_rate(vs_lfdem, tmp_path):
+    run = tmp_path / "lfdem"
+    run.mkdir()
+    for path in (REPLAY.parent / "end0.01").iterdir():
+        text = path.read_text()
+        if path.name.startswith("data_"):  # the first row's shear rate (column 3) off by 1e-3
+            lines = text.splitlines()
+            first = next(k for k, line in enumerate(lines) if line.strip() and not line.startswith("#"))
+            cols = lines[first].split()
+            cols[2] = repr(float(cols[2]) * 1.001)
+            lines[first] = " ".join(cols)
+            text = "\n".join(lines) + "\n"
+        (run / path.name).write_text(text)
+    lf = vs_lfdem.read_lfdem_run(run)
+    params = SimParams(n_particles=100, phi=0.76, stress=10.0, seed=1, strain=0.01)
+    pos, radii, box = initial_configuration(params)
+    from rheograph.sim import Simulation
+
+    rate0 = Simulation(params).step().shear_rate
+    rg = dict(positions0=pos, radii=radii, lx=box, rate0=rate0)
+    with pytest.raises(RuntimeError, match="first shear rate"):
+        vs_lfdem.check_same_start(100, REPLAY.parent / "conf.dat", lf, rg, params)
+    lf_true = vs_lfdem.read_lfdem_run(REPLAY.parent / "end0.01")
+    assert "same start checked" in vs_lfdem.check_same_start(
+        100, REPLAY.parent / "conf.dat", lf_true, rg, params
+    )

@@ -169,6 +169,12 @@ class SnapshotDataModule(L.LightningDataModule):
             self.test_idx = index[folds == self.fold]
             self.val_idx = index[folds == (self.fold + 1) % self.num_folds]
             self.train_idx = index[(folds != self.fold) & (folds != (self.fold + 1) % self.num_folds)]
+        if self.train_idx.size == 0 or self.val_idx.size == 0:
+            raise InputError(
+                f"data.num_folds={self.num_folds} with data.split={self.split} leaves fold {self.fold} no "
+                f"training or validation snapshots ({index.size} snapshots of {np.unique(runs).size} runs; "
+                "fold k tests, fold k+1 validates, the rest train): use more folds or more data"
+            )
         if self.train_fraction < 1.0:
             self.train_idx = thin_snapshots(self.train_idx, runs, self.train_fraction)
         # edge-feature standardisation, fitted on the training graphs only (binary and constant

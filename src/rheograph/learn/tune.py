@@ -156,19 +156,25 @@ def check_study_space(study: optuna.Study, space: dict) -> None:
 
 def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     t = cfg.tune
-    if objective is None:
-        check_base_config(cfg)
     # heartbeats: a trial whose process died (a killed session, a lost node) stops heartbeating and is
     # marked FAIL when the study next runs, then retried once with the same parameters; without them
     # it would stay RUNNING for ever
     with warnings.catch_warnings():  # the retry callback is marked experimental (stable since 2.8)
         warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-        storage = optuna.storages.RDBStorage(
-            t.storage,
-            heartbeat_interval=int(t.heartbeat_seconds),
-            grace_period=int(t.grace_seconds),
-            heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=1),
-        )
+        try:
+            storage = optuna.storages.RDBStorage(
+                t.storage,
+                heartbeat_interval=int(t.heartbeat_seconds),
+                grace_period=int(t.grace_seconds),
+                heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=1),
+            )
+        except Exception as exc:  # SQLAlchemy: an unknown dialect, a malformed URL, an unreachable server
+            raise InputError(
+                f"tune.storage={t.storage!r} is not a usable database URL ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[0]}); e.g. sqlite:///outputs/tune/study.db"
+            ) from exc
+    if objective is None:  # after the storage: a bad URL is named before any data is read
+        check_base_config(cfg)
     study = optuna.create_study(
         study_name=t.study_name,
         storage=storage,

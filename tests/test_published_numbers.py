@@ -1,0 +1,61 @@
+"""The published surrogate numbers are guarded: committed model bundles, run on the committed dataset,
+reproduce the held-out predictions committed beside them (to float round-off), so that a change in the
+features, the graph builder or the model code cannot move the docs' R² without a test failing."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _local(path: str) -> Path:
+    """A split file's absolute path, found under this clone's data/ folder."""
+    return ROOT / path[path.index("data/") :]
+
+
+def _first_test_run(run_dir: Path, k: int):
+    split = json.loads((run_dir / f"fold{k}_split.json").read_text())
+    saved = np.load(run_dir / f"fold{k}_predictions.npz")
+    run = int(saved["run_id"][0])
+    return (
+        _local(split["files"][run]),
+        saved["pred"][saved["run_id"] == run],
+        saved["true"][saved["run_id"] == run],
+    )
+
+
+@pytest.mark.parametrize(
+    "run_dir, bundle",
+    [
+        # the default inputs (graph=physics_solve), through the shipped model's bundle
+        ("docs/results/surrogate_per_phi/N400_phi0.76", "src/rheograph/models/N400_phi0.76/fold0.pt"),
+        # positions-only physics features (graph=physics_positions), the run's own bundle
+        ("docs/results/surrogate_study/physics_positions_grouped", None),
+    ],
+)
+def test_committed_bundle_reproduces_its_committed_test_predictions(run_dir, bundle):
+    from rheograph.graphs.dataset import snapshot_graphs
+    from rheograph.learn.predict import load_bundle
+    from rheograph.learn.train import predict_dataset
+
+    run_dir = ROOT / run_dir
+    path, expected, truth = _first_test_run(run_dir, 0)
+    module, settings, _ = load_bundle(ROOT / bundle if bundle else run_dir / "fold0.pt")
+    graphs = snapshot_graphs(path, settings, run_id=0)  # the training selection: strain >= min_strain
+    pred, true, _ = predict_dataset(module, graphs)
+    np.testing.assert_array_equal(true, truth)  # the same snapshots, in the same order
+    np.testing.assert_allclose(pred, expected, rtol=1e-5, atol=1e-7)
+
+
+def test_shipped_model_is_its_training_runs_bundles():
+    """A shipped model's weights are the training run's, bit for bit (shipping only adds records)."""
+    import torch
+
+    shipped = torch.load(ROOT / "src/rheograph/models/N400_phi0.76/fold3.pt", weights_only=True)
+    trained = torch.load(ROOT / "docs/results/surrogate_per_phi/N400_phi0.76/fold3.pt", weights_only=True)
+    for key, value in trained["state_dict"].items():
+        assert torch.equal(shipped["state_dict"][key], value), key
+    assert shipped["graph"] == trained["graph"] and shipped["hparams"] == trained["hparams"]
