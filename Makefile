@@ -11,7 +11,7 @@ export OMP_WAIT_POLICY ?= PASSIVE
 SYSTEM_PACKAGES := libsuitesparse-dev libopenblas0-serial
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: install system-packages demo test lint
+.PHONY: install system-packages demo test test-slow lint
 
 install: $(VENV)/.installed
 
@@ -41,6 +41,10 @@ demo: install
 
 test: install
 	$(PY) -m pytest -q
+
+# the long tests (N = 400 runs against LF_DEM's series, dense high-stress runs): CI runs them after `test`
+test-slow: install
+	$(PY) -m pytest -q -m slow
 
 lint: install
 	$(VENV)/bin/ruff check src tests bench *.py

@@ -22,45 +22,26 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import write_section  # noqa: E402
+from simulate_speed import publish  # noqa: E402
+
+from rheograph.learn.baselines import physics_fold_metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWS = ("physics_solve", "physics_offset")
 TARGETS = (("eta", "r2_log_eta"), ("pressure", "r2_log_pressure"), ("z_mu", "r2_z_mu"))
 
 
-def fold_physics_metrics(run_dir: Path, k: int, cache_dir: Path) -> dict:
-    from rheograph.graphs.dataset import SnapshotGraphDataset
-    from rheograph.learn.baselines import dataset_arrays, physics_rows
-    from rheograph.learn.module import fold_metrics
-    from rheograph.learn.predict import load_bundle
-    from rheograph.naming import state_point_key
-
-    split = json.loads((run_dir / f"fold{k}_split.json").read_text())
-    _, settings, _ = load_bundle(run_dir / f"fold{k}.pt")
-    dataset = SnapshotGraphDataset(split["files"], settings, cache_dir)
-    fitted = np.r_[split["train"], split["val"]]  # as the baselines: no early stopping to hold out for
-    test = np.asarray(split["test"])
-    rows = physics_rows(
-        dataset_arrays(dataset, fitted), dataset_arrays(dataset, test), settings.viscosity_scale
-    )
-    true = dataset.y_raw[test].numpy()
-    groups = state_point_key(dataset.phi[test].numpy(), dataset.stress[test].numpy())
-    jammed = dataset.jammed[test].numpy()
-    return {name: fold_metrics(pred, true, groups, jammed) for name, pred in rows.items()}
-
-
 def run_table(run_dir: Path, cache_dir: Path) -> list[str]:
     metrics = json.loads((run_dir / "metrics.json").read_text())
     folds = [f["fold"] for f in metrics["folds"]]
-    per_fold = [fold_physics_metrics(run_dir, k, cache_dir) for k in folds]
+    per_fold = [physics_fold_metrics(run_dir, k, cache_dir) for k in folds]
     net = {key: np.mean([f[f"test/{key}"] for f in metrics["folds"]]) for _, key in TARGETS}
     phys = {
         name: {key: float(np.nanmean([f[name][key] for f in per_fold])) for _, key in TARGETS}
         for name in ROWS
     }
     lines = [
-        f"| {run_dir.name} | graph network | " + " | ".join(f"{net[key]:.5f}" for _, key in TARGETS) + " | |"
+        f"| {run_dir.name} | graph network | " + " | ".join(f"{net[key]:.5f}" for _, key in TARGETS) + " |"
     ]
     labels = {
         "physics_solve": "physics: one-solve η_r",
@@ -70,7 +51,7 @@ def run_table(run_dir: Path, cache_dir: Path) -> list[str]:
         lines.append(
             f"| | {labels[name]}, spring Π, counted Z_μ | "
             + " | ".join(f"{phys[name][key]:.5f}" for _, key in TARGETS)
-            + " | |"
+            + " |"
         )
     best = {key: max(phys[name][key] for name in ROWS) for _, key in TARGETS}
     removed = [
@@ -80,7 +61,7 @@ def run_table(run_dir: Path, cache_dir: Path) -> list[str]:
     lines.append(
         "| | share of the best physics row's residual variance the network removes | "
         + " | ".join(f"{100 * r:.0f} %" for r in removed)
-        + " | |"
+        + " |"
     )
     return lines
 
@@ -98,8 +79,8 @@ def main(argv=None) -> int:
         "same positions and the imposed stress, nothing learned but the per-(φ, σ) offset of the second "
         "row, fitted on the fold's training and validation snapshots.",
         "",
-        "| run | predictor | R² log η_r | R² log Π | R² Z_μ | |",
-        "|---|---|---|---|---|---|",
+        "| run | predictor | R² log η_r | R² log Π | R² Z_μ |",
+        "|---|---|---|---|---|",
     ]
     for run in args.runs:
         lines += run_table(Path(run), Path(args.cache_dir))
@@ -107,11 +88,7 @@ def main(argv=None) -> int:
         [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
     )
     lines += ["", f"Command: `{command}`"]
-    print("\n".join(lines), flush=True)
-    if not args.no_write:
-        write_section(
-            ROOT / "docs" / "benchmarks.md", "physics_rows", "\n".join(lines), "## 5. Surrogate cost"
-        )
+    publish("physics_rows", "\n".join(lines), not args.no_write)
     return 0
 
 

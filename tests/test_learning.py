@@ -308,6 +308,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             # Pi in sigma0: its spread over the three stresses is the learnable signal asserted below
             # (Pi / sigma of N = 64 snapshots is mostly noise)
             "graph.pressure_per_stress=false",
+            "graph.pressure_on_spring=false",
         ]
     )
     run_dir = tmp_path / "run"

@@ -31,7 +31,9 @@ def _first_test_run(run_dir: Path, k: int):
     "run_dir, bundle",
     [
         # the default inputs (graph=physics_solve), through the shipped model's bundle
-        ("docs/results/surrogate_per_phi/N400_phi0.76", "src/rheograph/models/N400_phi0.76/fold0.pt"),
+        ("docs/results/pressure_on_spring/N400_phi0.76", "src/rheograph/models/N400_phi0.76/fold0.pt"),
+        # the previous default (Pi pooled, not on the spring sum), behind the other shipped models
+        ("docs/results/surrogate_per_phi/N400_phi0.7", "src/rheograph/models/N400_phi0.70/fold0.pt"),
         # positions-only physics features (graph=physics_positions), the run's own bundle
         ("docs/results/surrogate_study/physics_positions_grouped", None),
     ],
@@ -55,7 +57,7 @@ def test_shipped_model_is_its_training_runs_bundles():
     import torch
 
     shipped = torch.load(ROOT / "src/rheograph/models/N400_phi0.76/fold3.pt", weights_only=True)
-    trained = torch.load(ROOT / "docs/results/surrogate_per_phi/N400_phi0.76/fold3.pt", weights_only=True)
+    trained = torch.load(ROOT / "docs/results/pressure_on_spring/N400_phi0.76/fold3.pt", weights_only=True)
     for key, value in trained["state_dict"].items():
         assert torch.equal(shipped["state_dict"][key], value), key
     assert shipped["graph"] == trained["graph"] and shipped["hparams"] == trained["hparams"]

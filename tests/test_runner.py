@@ -482,9 +482,16 @@ def test_unknown_parameter_is_rejected():
         SimParams.from_mapping({**TINY, "temperature": 1.0})
 
 
-@pytest.mark.parametrize("stress", [200.0, 1000.0])
-@pytest.mark.parametrize("phi", [0.80, 0.82])
-@pytest.mark.parametrize("integrator", ["euler", "implicit"])
+DENSE = [
+    (i, phi, stress) for i in ("euler", "implicit") for phi in (0.80, 0.82) for stress in (200.0, 1000.0)
+]
+
+
+# the densest, stiffest case of each integrator by default; the other six with -m slow
+@pytest.mark.parametrize(
+    "integrator, phi, stress",
+    [case if case[1:] == (0.82, 1000.0) else pytest.param(*case, marks=pytest.mark.slow) for case in DENSE],
+)
 def test_dense_high_stress_runs_stay_finite_with_bounded_overlap(tmp_path, phi, stress, integrator):
     params = SimParams(
         integrator=integrator,

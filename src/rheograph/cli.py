@@ -91,10 +91,18 @@ def train_main(cfg: DictConfig) -> float:
     )
     if "baseline/descriptors_solve/r2_log_eta" in summary:
         log.info(
-            "trees given the same computed inputs (one-solve η_r, counted Z_μ): %.3f, %.3f, %.3f",
+            "trees given the same computed inputs (one-solve η_r, counted Z_μ, spring Π): %.3f, %.3f, %.3f",
             summary["baseline/descriptors_solve/r2_log_eta"],
             summary["baseline/descriptors_solve/r2_log_pressure"],
             summary["baseline/descriptors_solve/r2_z_mu"],
+        )
+    if "baseline/physics_offset/r2_log_eta" in summary:
+        log.info(
+            "physics only, nothing learned but a (φ, σ) offset of the one-solve η_r (spring Π, counted "
+            "Z_μ): %.3f, %.4f, %.4f",
+            summary["baseline/physics_offset/r2_log_eta"],
+            summary["baseline/physics_offset/r2_log_pressure"],
+            summary["baseline/physics_offset/r2_z_mu"],
         )
     log.info("report: %s (all metrics: metrics.json)", run_dir / "report.md")
     return summary["val/loss"]

@@ -40,8 +40,8 @@ log = logging.getLogger("rheograph.graphs")
 @dataclass(frozen=True)
 class GraphSettings:
     """Everything that determines a graph and its targets (hashed into the cache directory name, except
-    the three options that only say how the model reads the targets: ``pressure_per_stress``,
-    ``z_mu_on_count``, ``viscosity_on_solve``)."""
+    the options that only say how the model reads the targets: ``pressure_per_stress``,
+    ``z_mu_on_count``, ``viscosity_on_solve``, ``pressure_on_spring``)."""
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = PAPER_EDGE_FEATURES
@@ -58,6 +58,9 @@ class GraphSettings:
     z_mu_on_count: bool = False
     # the model learns eta_r as a correction to the one-solve viscosity solve_viscosity (a graph input)
     viscosity_on_solve: bool = False
+    # the model learns Pi / sigma as a correction to the contact-spring pressure spring_pressure (a graph
+    # input); needs pressure_per_stress
+    pressure_on_spring: bool = False
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -92,6 +95,14 @@ class GraphSettings:
             raise InputError(
                 "graph.viscosity_on_solve=true learns eta_r as a correction to the one-solve viscosity: "
                 f"add solve_viscosity to graph.graph_inputs (now {list(self.graph_inputs)})"
+            )
+        if self.pressure_on_spring and not (
+            self.pressure_per_stress and "spring_pressure" in self.graph_inputs
+        ):
+            raise InputError(
+                "graph.pressure_on_spring=true learns Pi / sigma as a correction to the contact-spring "
+                "pressure: needs graph.pressure_per_stress=true and spring_pressure in graph.graph_inputs "
+                f"(now {list(self.graph_inputs)})"
             )
         if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
             raise InputError(
@@ -180,6 +191,9 @@ def snapshot_graphs(
         # contact-spring pressure (2 pi sigma / A) sum r a_bar overlap [sigma0] (overlap in delta_sigma),
         # and the counted frictional contacts
         physics = [eta, 2.0 * np.pi * snaps.stress * descriptors[3], known["frictional_coordination"]]
+        known["spring_pressure"] = float(
+            forward_transform(2.0 * np.pi * descriptors[3], settings.pressure_scale)
+        )
         u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
         edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
         raw = snaps.targets[idx]
@@ -244,7 +258,13 @@ class SnapshotGraphDataset(InMemoryDataset):
                 "settings": {
                     k: v
                     for k, v in asdict(settings).items()
-                    if k not in ("pressure_per_stress", "z_mu_on_count", "viscosity_on_solve")
+                    if k
+                    not in (
+                        "pressure_per_stress",
+                        "z_mu_on_count",
+                        "viscosity_on_solve",
+                        "pressure_on_spring",
+                    )
                 },
                 "files": _files_fingerprint(self.files),
                 **({"lfdem_params": _files_fingerprint([self.lfdem_params])} if self.lfdem_params else {}),

@@ -227,8 +227,10 @@ def node_features(radii, size_ratio):
 # imposed stress (COMPUTED_GRAPH_INPUTS): solve_viscosity (solve_viscosity() below, on the eta_r target's
 # asinh scale) and frictional_coordination, 2 x (pairs whose normal spring force exceeds the critical
 # load) / N — the CLM's frictional contacts counted, i.e. Z_mu itself: with the CLM, Z_mu is a count that
-# positions and sigma fix exactly (tests/test_learning.py), not something to learn.
-COMPUTED_GRAPH_INPUTS = ("solve_viscosity", "frictional_coordination")
+# positions and sigma fix exactly (tests/test_learning.py), not something to learn — and spring_pressure,
+# the contact-spring pressure per imposed stress (2 pi / A) sum r a_bar overlap / delta_sigma on the Pi
+# target's asinh scale: with k_n proportional to sigma it is what positions fix of Pi / sigma.
+COMPUTED_GRAPH_INPUTS = ("solve_viscosity", "frictional_coordination", "spring_pressure")
 GRAPH_INPUTS = ("log_stress", "phi", *COMPUTED_GRAPH_INPUTS)
 
 

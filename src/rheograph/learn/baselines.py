@@ -133,3 +133,32 @@ def dataset_arrays(dataset, index) -> dict:
     if computed:  # the graph inputs computed from positions and sigma, (G, k)
         arrays["computed_inputs"] = dataset.u[index][:, computed].double().numpy()
     return arrays
+
+
+def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
+    """Metrics (``fold_metrics``) of the physics-only rows on the test fold ``k`` of a finished training run
+    ``run_dir``, its graphs rebuilt from the fold's split file (the same files and graph settings: the
+    same order as in training); for runs made before the rows were part of every report."""
+    import json
+    from pathlib import Path
+
+    from rheograph.graphs.dataset import SnapshotGraphDataset
+    from rheograph.learn.module import fold_metrics
+    from rheograph.learn.predict import load_bundle
+    from rheograph.naming import state_point_key
+
+    run_dir = Path(run_dir)
+    split = json.loads((run_dir / f"fold{k}_split.json").read_text())
+    _, settings, _ = load_bundle(run_dir / f"fold{k}.pt")
+    # the split records absolute paths: a clone elsewhere finds them under the same data/ folder
+    files = [f if Path(f).exists() or "data/" not in f else f[f.index("data/") :] for f in split["files"]]
+    dataset = SnapshotGraphDataset(files, settings, cache_dir)
+    fitted = np.r_[split["train"], split["val"]]  # as the baselines: no early stopping to hold out for
+    test = np.asarray(split["test"])
+    rows = physics_rows(
+        dataset_arrays(dataset, fitted), dataset_arrays(dataset, test), settings.viscosity_scale
+    )
+    true = dataset.y_raw[test].numpy()
+    groups = state_point_key(dataset.phi[test].numpy(), dataset.stress[test].numpy())
+    jammed = dataset.jammed[test].numpy()
+    return {name: fold_metrics(pred, true, groups, jammed) for name, pred in rows.items()}

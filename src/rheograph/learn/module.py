@@ -184,7 +184,10 @@ class SurrogateModule(L.LightningModule):
     ``viscosity_input`` >= 0 (the column holding the one-solve viscosity, transformed like the eta_r
     target): the network learns the correction to it, which the contact history sets (|log10 ratio|
     <= 0.16 with a within-state spread <= 0.08 at phi <= 0.78, against 1.3 decades of eta_r), so a model
-    that meets a new area fraction extrapolates a small correction rather than eta_r itself.
+    that meets a new area fraction extrapolates a small correction rather than eta_r itself.  And
+    ``pressure_input`` >= 0 (the column holding the contact-spring pressure per stress, on the Pi
+    target's asinh scale; needs ``pressure_per_stress``): the network learns Pi / sigma minus it, the
+    lubrication and dashpot parts and what the springs' sum misses.
     """
 
     def __init__(
@@ -213,6 +216,7 @@ class SurrogateModule(L.LightningModule):
         pressure_per_stress: bool = False,
         z_mu_input: int = -1,
         viscosity_input: int = -1,
+        pressure_input: int = -1,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -263,7 +267,11 @@ class SurrogateModule(L.LightningModule):
 
     def _corrected(self) -> list[tuple[int, int]]:
         """(target, graph-input column) pairs whose target is learned as a correction to the input."""
-        pairs = [(0, self.hparams.viscosity_input), (2, self.hparams.z_mu_input)]
+        pairs = [
+            (0, self.hparams.viscosity_input),
+            (1, self.hparams.get("pressure_input", -1)),  # bundles of older versions have none
+            (2, self.hparams.z_mu_input),
+        ]
         return [(target, column) for target, column in pairs if column >= 0]
 
     def fit_target_scaling(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> None:
@@ -280,13 +288,15 @@ class SurrogateModule(L.LightningModule):
     def _transformed(self, z: torch.Tensor, batch) -> torch.Tensor:
         """Standardised network output (G, 3) -> transformed targets (Pi in sigma0)."""
         learned = z * self.target_std + self.target_mean
-        if self.hparams.pressure_per_stress:
-            learned = pressure_in_sigma0(learned, batch.stress.view(-1))
         corrected = self._corrected()
         if corrected:
             learned = learned.clone()
+        # the corrections are in the learned space (the spring pressure per stress): added before Pi
+        # returns to sigma0
         for target, column in corrected:
             learned[:, target] = learned[:, target] + batch.u[:, column].to(learned.dtype)
+        if self.hparams.pressure_per_stress:
+            learned = pressure_in_sigma0(learned, batch.stress.view(-1))
         return learned
 
     def forward(self, batch) -> torch.Tensor:

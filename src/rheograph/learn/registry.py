@@ -72,12 +72,11 @@ def _complete_bundle(bundle: dict, split_file: Path) -> dict:
 
 def _score_rows(metrics: dict) -> list[dict]:
     mean = metrics["mean"]
+    from rheograph.learn.report import BASELINE_LABELS
+
     rows = [("graph network", "test/")]
-    rows += [(name, f"baseline/{name}/") for name in ("stress_mean", "descriptors", "descriptors_solve")]
-    rows += [
-        (name, f"physics/{name}/")
-        for name in ("counted_z_mu", "spring_pressure", "solve_eta", "solve_eta_offset")
-    ]
+    names = ("physics_solve", "physics_offset", "stress_mean", "descriptors", "descriptors_solve")
+    rows += [(BASELINE_LABELS[name], f"baseline/{name}/") for name in names]
     out = []
     for label, prefix in rows:
         scores = {
@@ -96,8 +95,25 @@ def _relative(path: Path) -> str:
         return str(path)
 
 
-def write_card(directory: Path, name: str, run_dir: Path, bundle: dict) -> dict:
-    metrics = json.loads((run_dir / "metrics.json").read_text())
+def _with_physics_rows(run_dir: Path, metrics: dict, cache_dir) -> dict:
+    """``metrics`` with the physics-only rows' fold means, computed on the run's test folds where a run
+    of an older version lacks them."""
+    import numpy as np
+
+    from rheograph.learn.baselines import physics_fold_metrics
+
+    if any(key.startswith("baseline/physics_") for key in metrics["mean"]):
+        return metrics
+    per_fold = [physics_fold_metrics(run_dir, f["fold"], cache_dir) for f in metrics["folds"]]
+    mean = dict(metrics["mean"])
+    for name in per_fold[0]:
+        for key in per_fold[0][name]:
+            mean[f"baseline/{name}/{key}"] = float(np.nanmean([f[name][key] for f in per_fold]))
+    return {**metrics, "mean": mean}
+
+
+def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_dir="data/cache") -> dict:
+    metrics = _with_physics_rows(run_dir, json.loads((run_dir / "metrics.json").read_text()), cache_dir)
     domain, graph = bundle["domain"], bundle["graph"]
     card = {
         "name": name,
@@ -167,7 +183,7 @@ def card_markdown(card: dict) -> str:
     ]
 
     def fmt(v):
-        return "–" if v is None else f"{v:.4f}"
+        return "–" if v is None else f"{v:.5f}"
 
     for row in card["held_out_r2"]:
         lines.append(f"| {row['model']} | {fmt(row['eta'])} | {fmt(row['pressure'])} | {fmt(row['z_mu'])} |")

@@ -150,8 +150,10 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
 
     for label, prefix in models:
         lines.append(
-            f"| {label} | {mean_std(prefix + 'r2_log_eta')} | {mean_std(prefix + 'r2_log_pressure')} "
-            f"| {mean_std(prefix + 'r2_z_mu')} | {mean_std(prefix + 'r2_eta')} "
+            # log Pi and Z_mu to 4 digits: their R2 differ from 1 in the fourth (network against the
+            # physics-only rows)
+            f"| {label} | {mean_std(prefix + 'r2_log_eta')} | {mean_std(prefix + 'r2_log_pressure', 4)} "
+            f"| {mean_std(prefix + 'r2_z_mu', 4)} | {mean_std(prefix + 'r2_eta')} "
             f"| {mean_std(prefix + 'r2_pressure')} | {means(prefix, 'within15')} | {means(prefix, 'fluct')} |"
         )
     excluded = sum(int(r.get("test/n_nonpositive_pressure", 0)) for r in fold_results)

@@ -122,6 +122,9 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         viscosity_input=(
             settings.graph_inputs.index("solve_viscosity") if settings.viscosity_on_solve else -1
         ),
+        pressure_input=(
+            settings.graph_inputs.index("spring_pressure") if settings.pressure_on_spring else -1
+        ),
         _convert_="all",
     )
     train = torch.as_tensor(dm.train_idx)
