@@ -20,13 +20,17 @@ def compose_sim(overrides):
         return compose(config_name="simulate", overrides=overrides)
 
 
-@pytest.mark.parametrize("preset", ["tiny", "n400", "n2000"])
+@pytest.mark.parametrize("preset", ["tiny", "n400", "n2000", "lfdem"])
 def test_presets_compose_into_valid_parameters(preset):
     cfg = compose_sim([f"sim={preset}"])
     params = SimParams.from_mapping(dict(cfg.sim))
     assert params == SimParams(**dict(cfg.sim))
-    if preset == "n400":
-        assert params == SimParams()  # the preset is exactly the documented defaults
+    if preset == "n400":  # physics.md's physics with the converged numerics
+        assert params == SimParams(integrator="implicit", disp_max=2e-3, snapshot_interval=0.1)
+    if preset == "lfdem":  # LF_DEM's discretisation
+        assert params == SimParams(
+            integrator="euler", lagged_step_control=True, disp_max=1e-3, snapshot_interval=0.1
+        )
 
 
 def test_every_parameter_is_configurable():
@@ -51,7 +55,7 @@ def test_simulate_script_writes_and_resumes(tmp_path):
         "progress=false",
     ]
     subprocess.run(cmd, check=True, capture_output=True, cwd=tmp_path)
-    files = list(tmp_path.glob("N64_phi0.7_s10_seed1_d0.002_euler/trajectory.h5"))
+    files = list(tmp_path.glob("N64_phi0.7_s10_seed1_d0.002_implicit/trajectory.h5"))
     assert len(files) == 1
     assert read_run_info(files[0])["status"] == "completed"
     # running it again with a longer strain continues the same file
