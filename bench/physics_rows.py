@@ -41,7 +41,9 @@ def run_table(run_dir: Path, cache_dir: Path) -> list[str]:
         for name in ROWS
     }
     lines = [
-        f"| {run_dir.name} | graph network | " + " | ".join(f"{net[key]:.5f}" for _, key in TARGETS) + " |"
+        f"| {run_dir.parent.name}/{run_dir.name} | graph network | "
+        + " | ".join(f"{net[key]:.5f}" for _, key in TARGETS)
+        + " |"
     ]
     labels = {
         "physics_solve": "physics: one-solve η_r",
