@@ -177,7 +177,7 @@ def plot(points, reference, out_png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.9))
     series = defaultdict(list)
     for p in points:
         series[(p["phi"], p["disp_max"], p["integrator"])].append(p)
@@ -213,8 +213,11 @@ def plot(points, reference, out_png: Path) -> None:
             ax.set_yscale("log")
         ax.set_xlabel("σ / σ0")
         ax.set_ylabel(label)
-    axes[0].legend(fontsize=7)
-    fig.tight_layout()
+    # one legend below the panels: inside one it would cover the densest (highest) curves
+    handles, labels = axes[0].get_legend_handles_labels()
+    rows = -(-len(labels) // 3)
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.032 * rows + 0.01, 1, 1))
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png, dpi=120)
     plt.close(fig)
