@@ -341,7 +341,17 @@ def test_predict_cli_reads_all_kinds_and_names_bad_input(tiny_files, tmp_path):
     n = len(read_snapshots(tiny_files[0]))
     assert len(lines) - 1 == 2 * n + 7
     # bad input names itself (in process: the one-line exit of predict.py is tests/test_faults.py's)
+    import h5py
+
     from rheograph.learn.predict import main
+
+    # HDF5 output, with a source path that is not ASCII
+    odd = tmp_path / "φ0.72 snapshot.npz"
+    shutil.copy(tmp_path / "s.npz", odd)
+    main(["--models", "N400_phi0.76", "--out", str(tmp_path / "p.h5"), "--input", str(odd)])
+    with h5py.File(tmp_path / "p.h5") as h5:
+        assert h5["source"].asstr()[0] == str(odd) and h5["eta_pred"].shape == (n,)
+        assert h5.attrs["model"] == "N400_phi0.76"
 
     (tmp_path / "notes.txt").write_text("x")
     for argv, message in (

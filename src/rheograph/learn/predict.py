@@ -318,7 +318,10 @@ def write_table(table: dict, out: Path, header: dict) -> None:
 
         with h5py.File(out, "w") as h5:
             for key, value in table.items():
-                h5[key] = value.astype("S") if value.dtype.kind == "U" else value
+                if value.dtype.kind == "U":  # variable-length UTF-8 (paths and notes may be non-ASCII)
+                    h5.create_dataset(key, data=value.astype(object), dtype=h5py.string_dtype())
+                else:
+                    h5[key] = value
             for key, value in header.items():
                 h5.attrs[key] = value
         return
