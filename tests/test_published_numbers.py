@@ -27,13 +27,20 @@ def _first_test_run(run_dir: Path, k: int):
     )
 
 
+def _shipped(name: str) -> tuple[str, str]:
+    """(training run directory, fold-0 bundle) of a shipped model, from its card."""
+    from rheograph.learn.registry import MODELS_DIR
+
+    card = json.loads((MODELS_DIR / name / "card.json").read_text())
+    return card["trained_from"], str(MODELS_DIR / name / "fold0.pt")
+
+
 @pytest.mark.parametrize(
     "run_dir, bundle",
     [
-        # the default inputs (graph=physics_solve), through the shipped model's bundle
-        ("docs/results/pressure_on_spring/N400_phi0.76", "src/rheograph/models/N400_phi0.76/fold0.pt"),
-        # the previous default (Pi pooled, not on the spring sum), behind the other shipped models
-        ("docs/results/surrogate_per_phi/N400_phi0.7", "src/rheograph/models/N400_phi0.70/fold0.pt"),
+        # the default inputs (graph=physics_solve), through the shipped models' bundles
+        _shipped("N400_phi0.76"),
+        _shipped("N400_phi0.70"),
         # positions-only physics features (graph=physics_positions), the run's own bundle
         ("docs/results/surrogate_study/physics_positions_grouped", None),
     ],
@@ -45,7 +52,7 @@ def test_committed_bundle_reproduces_its_committed_test_predictions(run_dir, bun
 
     run_dir = ROOT / run_dir
     path, expected, truth = _first_test_run(run_dir, 0)
-    module, settings, _ = load_bundle(ROOT / bundle if bundle else run_dir / "fold0.pt")
+    module, settings, _ = load_bundle(bundle if bundle else run_dir / "fold0.pt")
     graphs = snapshot_graphs(path, settings, run_id=0)  # the training selection: strain >= min_strain
     pred, true, _ = predict_dataset(module, graphs)
     np.testing.assert_array_equal(true, truth)  # the same snapshots, in the same order
@@ -56,8 +63,9 @@ def test_shipped_model_is_its_training_runs_bundles():
     """A shipped model's weights are the training run's, bit for bit (shipping only adds records)."""
     import torch
 
-    shipped = torch.load(ROOT / "src/rheograph/models/N400_phi0.76/fold3.pt", weights_only=True)
-    trained = torch.load(ROOT / "docs/results/pressure_on_spring/N400_phi0.76/fold3.pt", weights_only=True)
+    run_dir, bundle = _shipped("N400_phi0.76")
+    shipped = torch.load(Path(bundle).with_name("fold3.pt"), weights_only=True)
+    trained = torch.load(ROOT / run_dir / "fold3.pt", weights_only=True)
     for key, value in trained["state_dict"].items():
         assert torch.equal(shipped["state_dict"][key], value), key
     assert shipped["graph"] == trained["graph"] and shipped["hparams"] == trained["hparams"]
