@@ -401,3 +401,68 @@ def test_train_py_trains_on_lfdem_runs(tmp_path):
     bundle = torch.load(tmp_path / "run" / "fold0.pt", weights_only=True)
     assert bundle["domain"]["physical_params"]["kn_coefficient"] == 2e4
     assert bundle["domain"]["solve_numerics"][0]["disp_max"] == 1e-3
+
+
+def test_spring_pressure_row_is_the_simulators_contact_spring_virial():
+    """The physics-only Π, (2π σ / A) Σ r ā δ / δ_σ from positions, is the trace of the simulator's own
+    contact-spring stress (rheograph.sim.stress.spring_stress) at that configuration: tangential springs
+    carry no trace, so positions alone fix it."""
+    from conftest import sheared_frictional_problem
+
+    from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
+    from rheograph.io.snapshots import snapshots_from_values
+    from rheograph.sim import contacts
+    from rheograph.sim.stress import spring_stress
+
+    sim, lp, _ = sheared_frictional_problem()
+    s, p = sim.state, sim.params
+    state = s.contact_state.copy()
+    contacts.critical_load_update(
+        s.radii, s.pair_i, s.pair_j, lp.nvec, lp.xi, s.stretch.copy(), state, p.kn, p.kt, p.mu, 1.0
+    )
+    virial = spring_stress(s.pair_i, lp.nvec, lp.r, lp.f_on_i, state, True)
+    expected = -sim.stress_factor * (virial[0] + virial[2]) / 3.0
+    snaps = snapshots_from_values(
+        {
+            "positions": s.positions, "radii": s.radii, "box": [s.lx, s.ly], "le_offset": s.le_offset,
+            "stress": p.stress, "phi": p.phi, "disp_max": p.disp_max,
+            **{k: getattr(p, k) for k in ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")},
+        },
+        "test",
+    )  # fmt: skip
+    (graph,) = snapshot_graphs(snaps, GraphSettings(), 0, training=False)
+    assert expected > 0 and (state != contacts.NONE).sum() > 20
+    assert graph.physics[0, 1].item() == pytest.approx(expected, rel=1e-10)
+
+
+def test_declared_position_noise_is_out_of_domain_with_the_reason(model, tiny_files):
+    snaps = read_snapshots(tiny_files[2])
+    values = dict(
+        positions=snaps.positions[-1:], radii=snaps.radii, box=[snaps.lx, snaps.ly],
+        le_offset=snaps.le_offset[-1], stress=snaps.stress, phi=snaps.phi, **PHYSICAL,
+    )  # fmt: skip
+    exact = model.predict(**values)
+    noisy = model.predict(**values, position_noise=0.01)
+    assert "positions known to" not in exact["notes"][0]
+    assert noisy["in_domain"][0] == 0 and "positions known to 0.01 a" in noisy["notes"][0]
+
+
+def test_damaged_sources_and_a_bad_output_path_are_refused_by_name(tmp_path):
+    from rheograph.learn.predict import main
+
+    lines = PAR.read_text().splitlines()
+    lines[30] = "7 1 not-a-number 0 1.0 0 0 0 0 0 0 0 0 0 0"
+    (tmp_path / PAR.name).write_text("\n".join(lines) + "\n")
+    shutil.copy(LFDEM / "input_conf_params_stress10cl_shear.dat", tmp_path)
+    with pytest.raises(InputError, match="cannot be read as an LF_DEM run"):
+        read_snapshots(tmp_path / PAR.name)
+    truncated = tmp_path / "cut.h5"  # a trajectory cut short: its HDF5 metadata is gone
+    with h5py.File(truncated, "w") as h5:
+        h5.create_group("snapshots")
+        h5["radii"] = np.ones(4)
+    data = truncated.read_bytes()
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="cut.h5"):
+        read_snapshots(truncated)
+    with pytest.raises(InputError, match="--out .*existing directory"):
+        main(["--models", "N400_phi0.76", "--out", str(tmp_path / "absent" / "p.csv"), "--input", str(PAR)])

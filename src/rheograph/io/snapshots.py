@@ -36,6 +36,7 @@ PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "
 # ratio is read off the radii)
 BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")
 TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
+KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
 
 @dataclass
@@ -389,10 +390,18 @@ def read_snapshots(path: str | Path, lfdem_params: str | Path | None = None) -> 
     """The snapshots of any source (module docstring); ``lfdem_params``: LF_DEM's parameter file, for
     LF_DEM runs (``rheograph.io.lfdem.read_lfdem``)."""
     kind = source_kind(path)
-    if kind == "lfdem":
-        from rheograph.io.lfdem import read_lfdem
-
-        return read_lfdem(path, lfdem_params)
-    if lfdem_params is not None:
+    if kind != "lfdem" and lfdem_params is not None:
         raise InputError(f"{path}: an LF_DEM parameter file was given, but this is not an LF_DEM par_*.dat")
-    return read_trajectory(path) if kind == "rheograph" else read_bare(path)
+    try:
+        if kind == "lfdem":
+            from rheograph.io.lfdem import read_lfdem
+
+            return read_lfdem(path, lfdem_params)
+        return read_trajectory(path) if kind == "rheograph" else read_bare(path)
+    except InputError:
+        raise
+    except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:  # damaged or malformed content
+        raise InputError(
+            f"{path}: cannot be read as {KIND_NAMES[kind]} ({type(exc).__name__}: {exc}); is it truncated "
+            "or of another format?"
+        ) from exc

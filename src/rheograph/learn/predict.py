@@ -53,8 +53,9 @@ from rheograph.learn.registry import list_models, model_paths, read_card
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 
 # Models trained on simulator output read overlaps of ~1e-3 a exactly (positions stored to 1e-7 a):
-# positions known only to a worse RMS precision [a] than this are outside their domain.  3e-5 a is the
-# rounding of LF_DEM's 6-digit par files at N = 2000 box edges (docs/results.md, "LF_DEM snapshots").
+# positions known only to a worse RMS precision [a] than this are outside their domain.  Set just above
+# the 2.2e-5 a RMS rounding of LF_DEM's 6-digit par files at N = 400, on which the exact model still
+# scores R2 log eta_r 0.989 (docs/benchmarks.md, "A shipped model on LF_DEM snapshots").
 EXACT_POSITION_PRECISION = 3e-5
 
 
@@ -312,8 +313,18 @@ def concatenate(tables: list[dict]) -> dict:
 
 
 def write_table(table: dict, out: Path, header: dict) -> None:
-    """CSV (``#``-comment lines with ``header`` first) or HDF5 (``header`` as attributes)."""
-    if out.suffix == ".h5":
+    """CSV (``#``-comment lines with ``header`` first) or HDF5 (``header`` as attributes), through a
+    temporary file: ``out`` appears whole or not at all."""
+    tmp = out.with_name(out.name + ".tmp")
+    try:
+        _write_table(table, tmp, out.suffix, header)
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _write_table(table: dict, out: Path, suffix: str, header: dict) -> None:
+    if suffix == ".h5":
         import h5py
 
         with h5py.File(out, "w") as h5:
@@ -367,6 +378,9 @@ def main(argv=None) -> None:
     for name in ("models", "input", "out"):
         if getattr(args, name) is None:
             ap.error(f"--{name} is required (or --list-models)")
+    out = Path(args.out)
+    if out.suffix not in (".csv", ".h5") or not out.parent.is_dir():
+        raise InputError(f"--out {out}: must be a .csv or .h5 file in an existing directory")
     model = load_model(args.models)
     given = dict(_parse_param(p) for p in args.param)
     tables = []
@@ -376,7 +390,6 @@ def main(argv=None) -> None:
             snaps.params = {**snaps.params, **given}
         tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
     table = concatenate(tables)
-    out = Path(args.out)
     header = {"model": model.label, "inputs": " ".join(args.input)}
     if given:
         header["parameters given"] = ", ".join(f"{k}={v:g}" for k, v in given.items())
