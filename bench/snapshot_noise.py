@@ -30,10 +30,6 @@ ROOT = Path(__file__).resolve().parents[1]
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
 
 
-def _local(path: str) -> str:
-    return path if Path(path).exists() or "data/" not in path else str(ROOT / path[path.index("data/") :])
-
-
 def fold_rows(run_dir: Path, k: int, noises, seed: int, cache_dir: Path) -> dict:
     """{(predictor, ε): (pred (G, 3), true (G, 3), groups (G,), jammed (G,))} for fold ``k``."""
     import dataclasses
@@ -41,6 +37,7 @@ def fold_rows(run_dir: Path, k: int, noises, seed: int, cache_dir: Path) -> dict
     from rheograph.graphs.dataset import SnapshotGraphDataset, snapshot_graphs
     from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.baselines import dataset_arrays, descriptor_trees, physics_rows
+    from rheograph.learn.datamodule import split_files
     from rheograph.learn.module import physical_targets
     from rheograph.learn.predict import load_bundle
     from rheograph.learn.train import predict_dataset
@@ -49,7 +46,7 @@ def fold_rows(run_dir: Path, k: int, noises, seed: int, cache_dir: Path) -> dict
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())
     saved = np.load(run_dir / f"fold{k}_predictions.npz")
     module, settings, _ = load_bundle(run_dir / f"fold{k}.pt")
-    files = [_local(f) for f in split["files"]]
+    files = split_files(split, ROOT)
     dataset = SnapshotGraphDataset(files, settings, cache_dir)
     fitted = dataset_arrays(dataset, np.r_[split["train"], split["val"]])
     lookup = saved["baseline_stress_mean"]  # physical predictions; reads no positions

@@ -8,12 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rheograph.learn.datamodule import split_files
+
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _local(path: str) -> Path:
-    """A split file's absolute path, found under this clone's data/ folder."""
-    return ROOT / path[path.index("data/") :]
 
 
 def _first_test_run(run_dir: Path, k: int):
@@ -21,7 +18,7 @@ def _first_test_run(run_dir: Path, k: int):
     saved = np.load(run_dir / f"fold{k}_predictions.npz")
     run = int(saved["run_id"][0])
     return (
-        _local(split["files"][run]),
+        Path(split_files(split, ROOT)[run]),
         saved["pred"][saved["run_id"] == run],
         saved["true"][saved["run_id"] == run],
     )

@@ -143,6 +143,7 @@ def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
     from pathlib import Path
 
     from rheograph.graphs.dataset import SnapshotGraphDataset
+    from rheograph.learn.datamodule import split_files
     from rheograph.learn.module import fold_metrics
     from rheograph.learn.predict import load_bundle
     from rheograph.naming import state_point_key
@@ -150,9 +151,7 @@ def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
     run_dir = Path(run_dir)
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())
     _, settings, _ = load_bundle(run_dir / f"fold{k}.pt")
-    # the split records absolute paths: a clone elsewhere finds them under the same data/ folder
-    files = [f if Path(f).exists() or "data/" not in f else f[f.index("data/") :] for f in split["files"]]
-    dataset = SnapshotGraphDataset(files, settings, cache_dir)
+    dataset = SnapshotGraphDataset(split_files(split), settings, cache_dir)
     fitted = np.r_[split["train"], split["val"]]  # as the baselines: no early stopping to hold out for
     test = np.asarray(split["test"])
     rows = physics_rows(

@@ -328,6 +328,16 @@ def suspension_record(files, lfdem_params=None) -> dict:
     return {"physical_params": {k: next(iter(v)) for k, v in physical.items()}, "solve_numerics": solve}
 
 
+def split_files(split: dict, root: str | Path = ".") -> list[str]:
+    """The trajectory files a fold's split record lists, found in this clone: the record holds the
+    absolute paths of the machine that trained, so a path that does not exist here is looked up under
+    ``root`` by its part from ``data/`` on."""
+    return [
+        f if Path(f).exists() or "data/" not in f else str(Path(root) / f[f.index("data/") :])
+        for f in split["files"]
+    ]
+
+
 def expand_files(files) -> list[str]:
     """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.collect``) into a sorted list."""
     from rheograph.io.index import index_files
