@@ -21,14 +21,17 @@ from rheograph.graphs.features import (
     GRAPH_INPUTS,
     HISTORY_EDGE_FEATURES,
     PAPER_EDGE_FEATURES,
+    SHELL_INPUTS,
+    SHELL_WIDTHS,
     forward_transform,
     node_features,
+    shell_inputs,
     snapshot_descriptors,
     snapshot_edges,
     solve_viscosity,
 )
 from rheograph.io.hdf5 import SCHEMA_VERSION
-from rheograph.io.snapshots import Snapshots, read_snapshots
+from rheograph.io.snapshots import Snapshots, read_snapshots, wrap_into_box
 
 TARGETS = ("viscosity", "pressure", "z_mu")
 # the step settings of the one-solve input (rheograph.graphs.features.solve_viscosity): numerics of the
@@ -61,6 +64,10 @@ class GraphSettings:
     # the model learns Pi / sigma as a correction to the contact-spring pressure spring_pressure (a graph
     # input); needs pressure_per_stress
     pressure_on_spring: bool = False
+    # training on imprecise positions: (eps_min, eps_max) [a], each training graph rebuilt every epoch
+    # from its positions plus fresh Gaussian noise of eps per coordinate, eps log-uniform in the range
+    # (validation and test graphs: one fixed draw each); empty: exact positions (NoisyGraphs)
+    noise_range: tuple = ()
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -103,6 +110,29 @@ class GraphSettings:
                 "graph.pressure_on_spring=true learns Pi / sigma as a correction to the contact-spring "
                 "pressure: needs graph.pressure_per_stress=true and spring_pressure in graph.graph_inputs "
                 f"(now {list(self.graph_inputs)})"
+            )
+        if self.noise_range:
+            low, high = (tuple(self.noise_range) + (None, None))[:2]
+            if len(self.noise_range) != 2 or not (0.0 < low <= high <= 1.0):
+                raise InputError(
+                    f"graph.noise_range={list(self.noise_range)} is invalid: allowed [eps_min, eps_max] "
+                    "with 0 < eps_min <= eps_max <= 1 (units of a)"
+                )
+            if "solve_viscosity" in self.graph_inputs:
+                raise InputError(
+                    "graph.noise_range rebuilds every training graph from re-noised positions each epoch; "
+                    "the one-solve input would cost a resistance solve per graph and epoch: drop "
+                    "solve_viscosity from graph.graph_inputs"
+                )
+            if set(self.edge_features) & set(HISTORY_EDGE_FEATURES):
+                raise InputError(
+                    "graph.noise_range: re-noised positions have no contact history; drop "
+                    f"{sorted(set(self.edge_features) & set(HISTORY_EDGE_FEATURES))} from graph.edge_features"
+                )
+        if set(self.graph_inputs) & set(SHELL_INPUTS) and self.cutoff < max(SHELL_WIDTHS):
+            raise InputError(
+                f"graph.cutoff={self.cutoff} is below the widest gap shell of the shell inputs "
+                f"({max(SHELL_WIDTHS)} a): raise it or drop the shell_* graph inputs"
             )
         if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
             raise InputError(
@@ -152,6 +182,12 @@ def snapshot_graphs(
             f"{path}: the one-solve input (solve_viscosity) needs the step disp_max, which this source does "
             "not record: add disp_max to the file"
         )
+    if "position_noise" in settings.graph_inputs and snaps.position_noise is None:
+        raise InputError(
+            f"{path}: the model reads the positions' precision (position_noise, RMS per coordinate in "
+            "units of a), which this source does not state: add the key position_noise to the file, "
+            "pass predict.py --position-noise EPS, or position_noise= to model.predict"
+        )
     finite = np.isfinite(snaps.targets).all(axis=1)
     if training:
         strain = np.nan_to_num(snaps.strain, nan=-np.inf)
@@ -170,56 +206,132 @@ def snapshot_graphs(
         contacts = [snaps.contacts[k] for k in keep]
     lx, ly, radii = snaps.lx, snaps.ly, snaps.radii
     check_edge_reach(lx, ly, radii, settings.cutoff, path)
-    x = torch.from_numpy(node_features(radii, params["size_ratio"]))
-    known = {"log_stress": np.log(snaps.stress), "phi": snaps.phi}
     solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
-    solve = "disp_max" in solve_params
-    graphs = []
-    for k, idx in enumerate(keep):
-        positions = snaps.positions[idx]
-        # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
-        eta = (
-            solve_viscosity(positions, radii, lx, ly, snaps.le_offset[idx], solve_params) if solve else np.nan
+    conditions = {"phi": snaps.phi, "position_noise": snaps.position_noise or 0.0}
+    return [
+        snapshot_graph(
+            snaps.positions[idx],
+            radii,
+            (lx, ly, snaps.le_offset[idx]),
+            solve_params,
+            settings,
+            conditions,
+            contacts=contacts[k],
+            targets=snaps.targets[idx],
+            jammed=bool(snaps.jammed[idx]),
+            strain=float(snaps.strain[idx]),
+            run_id=run_id,
         )
-        known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
-        edge_index, feats, pairs = snapshot_edges(
-            positions, radii, lx, ly, snaps.le_offset[idx], settings.cutoff, params, contacts[k]
+        for k, idx in enumerate(keep)
+    ]
+
+
+def snapshot_graph(
+    positions,
+    radii,
+    box,
+    params: dict,
+    settings: GraphSettings,
+    conditions: dict,
+    contacts=None,
+    targets=(np.nan, np.nan, np.nan),
+    jammed: bool = False,
+    strain: float = np.nan,
+    run_id: int = 0,
+) -> Data:
+    """The graph of one snapshot: positions (N, 2) [a], radii (N,) [a], box = (lx, ly, le_offset) [a];
+    ``params`` the run's parameter mapping (imposed ``stress`` included; with ``disp_max`` the one-solve
+    is computed, else its input and physics row are NaN), ``conditions`` the snapshot's known ``phi``
+    and ``position_noise`` [a], ``targets`` (eta_r, Pi [sigma0], Z_mu) (NaN where unknown)."""
+    lx, ly, le_offset = box
+    stress = float(params["stress"])
+    # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
+    eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if "disp_max" in params else np.nan
+    known = {"log_stress": np.log(stress), **conditions}
+    known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
+    edge_index, feats, pairs = snapshot_edges(
+        positions, radii, lx, ly, le_offset, settings.cutoff, params, contacts
+    )
+    known["frictional_coordination"] = 2.0 * feats["frictional"][: pairs["i"].size].sum() / radii.size
+    descriptors = snapshot_descriptors(pairs, radii.size, lx * ly)
+    # the physics-only estimates (rheograph.learn.baselines.physics_rows): the one-solve eta_r, the
+    # contact-spring pressure (2 pi sigma / A) sum r a_bar overlap [sigma0] (overlap in delta_sigma),
+    # and the counted frictional contacts
+    physics = [eta, 2.0 * np.pi * stress * descriptors[3], known["frictional_coordination"]]
+    known["spring_pressure"] = float(forward_transform(2.0 * np.pi * descriptors[3], settings.pressure_scale))
+    if set(settings.graph_inputs) & set(SHELL_INPUTS):
+        known.update(shell_inputs(pairs, radii.size))
+    u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
+    edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
+    raw = np.asarray(targets, dtype=np.float64)
+    y = settings.transform_targets(*raw)
+    return Data(
+        x=torch.from_numpy(node_features(radii, params["size_ratio"])),
+        pos=torch.from_numpy(np.asarray(positions, dtype=np.float64)),
+        box=torch.tensor([[lx, ly, le_offset]], dtype=torch.float64),
+        edge_index=torch.from_numpy(edge_index).long(),
+        edge_attr=torch.from_numpy(edge_attr).float(),
+        y=torch.from_numpy(y).float().view(1, 3),
+        y_raw=torch.from_numpy(raw).double().view(1, 3),
+        u=u,
+        area=torch.tensor([lx * ly], dtype=torch.float32),
+        descriptors=torch.from_numpy(descriptors).view(1, -1),
+        physics=torch.tensor([physics], dtype=torch.float64),
+        n_particles=torch.tensor([radii.size]),
+        jammed=torch.tensor([jammed]),
+        phi=torch.tensor([conditions["phi"]], dtype=torch.float64),
+        stress=torch.tensor([stress], dtype=torch.float64),
+        strain=torch.tensor([strain], dtype=torch.float64),
+        run_id=torch.tensor([run_id]),
+    )
+
+
+class NoisyGraphs(torch.utils.data.Dataset):
+    """Graphs rebuilt from their positions plus Gaussian noise of eps per coordinate, eps drawn
+    log-uniformly in ``settings.noise_range`` (an imaging-grade snapshot: the tracking error of a
+    microscope is ~0.01-0.03 a).  ``graphs``: exact graphs of ``snapshot_graphs`` (with ``pos``, ``box``);
+    ``run_params``: {run_id: the run's parameter mapping}.  ``fresh``: a new draw at every access (the
+    training set: new noise each epoch); otherwise one fixed draw per graph, seeded by ``seed`` and its
+    position (validation, test).  The graph's ``position_noise`` input is the drawn eps combined with
+    the source's own precision."""
+
+    def __init__(self, graphs, settings: GraphSettings, run_params: dict, fresh: bool, seed: int = 0):
+        self.graphs, self.settings, self.run_params = graphs, settings, run_params
+        self.fresh, self.seed = fresh, seed
+        self.log_range = np.log(np.asarray(settings.noise_range, dtype=np.float64))
+
+    def __len__(self) -> int:
+        return len(self.graphs)
+
+    def __getitem__(self, k: int) -> Data:
+        g = self.graphs[k]
+        if self.fresh:  # torch's generator: seeded by Lightning's seed_everything, per worker
+            rng = np.random.default_rng(int(torch.randint(0, 2**62, (1,))))
+        else:
+            rng = np.random.default_rng([self.seed, k])
+        eps = float(np.exp(rng.uniform(*self.log_range)))
+        return self.noisy(g, eps, rng)
+
+    def noisy(self, g: Data, eps: float, rng: np.random.Generator) -> Data:
+        """``g`` rebuilt from its positions plus noise of ``eps`` [a] per coordinate."""
+        params = self.run_params[int(g.run_id)]
+        radii = np.where(g.x[:, 1].numpy() > 0.5, float(params["size_ratio"]), 1.0)
+        pos = g.pos.numpy().astype(np.float64)
+        lx, ly, le_offset = (float(v) for v in g.box[0])
+        inputs = self.settings.graph_inputs
+        source_noise = float(g.u[0, inputs.index("position_noise")]) if "position_noise" in inputs else 0.0
+        return snapshot_graph(
+            wrap_into_box(pos + rng.normal(0.0, eps, pos.shape), lx, ly, le_offset),
+            radii,
+            (lx, ly, le_offset),
+            {**params, "stress": float(g.stress)},
+            self.settings,
+            {"phi": float(g.phi), "position_noise": float(np.hypot(eps, source_noise))},
+            targets=g.y_raw[0].numpy(),
+            jammed=bool(g.jammed),
+            strain=float(g.strain),
+            run_id=int(g.run_id),
         )
-        known["frictional_coordination"] = 2.0 * feats["frictional"][: pairs["i"].size].sum() / radii.size
-        descriptors = snapshot_descriptors(pairs, radii.size, lx * ly)
-        # the physics-only estimates (rheograph.learn.baselines.physics_rows): the one-solve eta_r, the
-        # contact-spring pressure (2 pi sigma / A) sum r a_bar overlap [sigma0] (overlap in delta_sigma),
-        # and the counted frictional contacts
-        physics = [eta, 2.0 * np.pi * snaps.stress * descriptors[3], known["frictional_coordination"]]
-        known["spring_pressure"] = float(
-            forward_transform(2.0 * np.pi * descriptors[3], settings.pressure_scale)
-        )
-        u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
-        edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
-        raw = snaps.targets[idx]
-        y = settings.transform_targets(*raw)
-        graphs.append(
-            Data(
-                x=x,
-                pos=torch.from_numpy(positions).float(),
-                box=torch.tensor([[lx, ly, snaps.le_offset[idx]]], dtype=torch.float64),
-                edge_index=torch.from_numpy(edge_index).long(),
-                edge_attr=torch.from_numpy(edge_attr).float(),
-                y=torch.from_numpy(y).float().view(1, 3),
-                y_raw=torch.from_numpy(raw).double().view(1, 3),
-                u=u,
-                area=torch.tensor([lx * ly], dtype=torch.float32),
-                descriptors=torch.from_numpy(descriptors).view(1, -1),
-                physics=torch.tensor([physics], dtype=torch.float64),
-                n_particles=torch.tensor([radii.size]),
-                jammed=torch.tensor([bool(snaps.jammed[idx])]),
-                phi=torch.tensor([snaps.phi], dtype=torch.float64),
-                stress=torch.tensor([snaps.stress], dtype=torch.float64),
-                strain=torch.tensor([snaps.strain[idx]], dtype=torch.float64),
-                run_id=torch.tensor([run_id]),
-            )
-        )
-    return graphs
 
 
 def check_edge_reach(lx: float, ly: float, radii: np.ndarray, cutoff: float, where) -> None:
@@ -264,6 +376,8 @@ class SnapshotGraphDataset(InMemoryDataset):
                         "z_mu_on_count",
                         "viscosity_on_solve",
                         "pressure_on_spring",
+                        # the cache holds the exact graphs; the noise is drawn when they are read
+                        "noise_range",
                     )
                 },
                 "files": _files_fingerprint(self.files),
@@ -271,8 +385,8 @@ class SnapshotGraphDataset(InMemoryDataset):
                 "schema": SCHEMA_VERSION,
                 # 3: jammed per snapshot (after the flow stopped), kept at any strain; 4: from the first row
                 # of the jam detector's window on (one row earlier than 3); 5: positions and box in each
-                # graph, any snapshot source
-                "version": 5,
+                # graph, any snapshot source; 6: positions in float64, shell and noise inputs
+                "version": 6,
             },
             sort_keys=True,
             default=list,

@@ -50,7 +50,8 @@ class Snapshots:
     (``disp_max``, ``dt_max``, ``lagged_step_control``); ``targets`` (S, 3): η_r, Π [σ0], Z_μ (NaN where
     unknown); ``jammed`` (S,) bool (arrested packings, whose η_r is not a target); ``contacts``: per
     snapshot the recorded contact states (pairs, states, stretches) of a rheograph trajectory, else None;
-    ``position_noise`` [a]: the stated precision of the positions (0 for exact simulator output)."""
+    ``position_noise`` [a]: the stated precision of the positions, RMS per coordinate (0 for exact
+    simulator output; None where a bare file or a caller does not state it)."""
 
     source: str
     kind: str
@@ -67,7 +68,7 @@ class Snapshots:
     jammed: np.ndarray
     numerics: dict = field(default_factory=dict)
     contacts: list | None = None
-    position_noise: float = 0.0
+    position_noise: float | None = 0.0
     status: str = ""
 
     @property
@@ -318,8 +319,8 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
             raise InputError(f"{where}: '{key}' needs one value per snapshot ({n_snap}), found {out.size}")
         return out
 
-    noise = _scalar(values, "position_noise", where) if "position_noise" in values else 0.0
-    if noise < 0:
+    noise = _scalar(values, "position_noise", where) if values.get("position_noise") is not None else None
+    if noise is not None and noise < 0:
         raise InputError(f"{where}: position_noise = {noise:g} must be >= 0 (units of a)")
     numerics = {"disp_max": _scalar(values, "disp_max", where)} if "disp_max" in values else {}
     return Snapshots(
@@ -351,7 +352,7 @@ def write_bare(path: str | Path, snapshots: Snapshots) -> None:
         "stress": snapshots.stress,
         "phi": snapshots.phi,
         "strain": snapshots.strain,
-        "position_noise": snapshots.position_noise,
+        **({} if snapshots.position_noise is None else {"position_noise": snapshots.position_noise}),
         **{k: v for k, v in snapshots.params.items()},
         **{key: snapshots.targets[:, k] for k, key in enumerate(TARGET_KEYS)},
         **snapshots.numerics,

@@ -21,7 +21,8 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from rheograph.errors import InputError
-from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, SnapshotGraphDataset
+from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, NoisyGraphs, SnapshotGraphDataset
+from rheograph.io.snapshots import read_snapshots
 from rheograph.learn.jamming import fit_jam_map
 from rheograph.naming import state_point_key
 
@@ -121,6 +122,7 @@ class SnapshotDataModule(L.LightningDataModule):
         self.train_fraction = train_fraction
         self.lfdem_params = lfdem_params
         self.dataset = None
+        self.run_params = None  # {run_id: parameter mapping}, for graphs rebuilt from noisy positions
 
     def selected_files(self) -> list[str]:
         """The trajectory files of ``data.files`` at ``data.phi`` and ``data.n_particles`` (either null: all):
@@ -199,6 +201,8 @@ class SnapshotDataModule(L.LightningDataModule):
                 dataset.run_id[train].numpy(),
                 dataset.jammed[train].numpy(),
             ),
+            # the position noise the model was trained on [a] (predict.py flags a snapshot beyond it)
+            "position_noise": list(self.graph.noise_range) if self.graph.noise_range else 0.0,
             # the suspension a snapshot must match, and the step of the one-solve input (predict.py)
             **suspension_record(self.files, self.lfdem_params),
         }
@@ -219,9 +223,22 @@ class SnapshotDataModule(L.LightningDataModule):
     def save_split(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.split_record()))
 
+    def graphs(self, idx, fresh: bool = False):
+        """The graphs at ``idx`` as the model sees them: with ``graph.noise_range``, rebuilt from
+        re-noised positions (``fresh``: new noise at every access, else one fixed draw per graph)."""
+        subset = self.dataset[torch.as_tensor(idx)]
+        if not self.graph.noise_range:
+            return subset
+        if self.run_params is None:
+            self.run_params = {
+                run_id: read_snapshots(path, self.lfdem_params).graph_params()
+                for run_id, path in enumerate(self.dataset.files)
+            }
+        return NoisyGraphs(subset, self.graph, self.run_params, fresh=fresh, seed=self.split_seed)
+
     def _loader(self, idx, shuffle):
         return DataLoader(
-            self.dataset[torch.as_tensor(idx)],
+            self.graphs(idx, fresh=shuffle),
             batch_size=self.batch_size,
             shuffle=shuffle,
             num_workers=self.num_workers,

@@ -122,6 +122,52 @@ def pressure_in_sigma0(y: torch.Tensor, stress: torch.Tensor) -> torch.Tensor:
     return out
 
 
+STATE_TABLE_ROWS = 256  # capacity of the state-mean table (state points of the training folds)
+
+
+def state_table(phi, log_stress, values, scored) -> torch.Tensor:
+    """(STATE_TABLE_ROWS, 5) rows (phi, log sigma/sigma0, mean of each of 3 targets) per state point of
+    training graphs: ``phi``, ``log_stress`` (G,), ``values`` (G, 3), ``scored`` (G, 3) bool (a target
+    left out of a graph's mean: eta_r of an arrested packing); NaN where a state point has no scored
+    value and in the unused rows."""
+    key = torch.stack([phi.double(), log_stress.double()], dim=1)
+    points, inverse = torch.unique(torch.round(key * 1e6) / 1e6, dim=0, return_inverse=True)
+    if points.shape[0] > STATE_TABLE_ROWS:
+        raise InputError(
+            f"model.on_state_mean: {points.shape[0]} training state points, at most {STATE_TABLE_ROWS}"
+        )
+    table = torch.full((STATE_TABLE_ROWS, 5), float("nan"), dtype=torch.float64)
+    table[: points.shape[0], :2] = points
+    for row in range(points.shape[0]):
+        members = inverse == row
+        for target in range(3):
+            keep = members & scored[:, target]
+            if keep.any():
+                table[row, 2 + target] = values[keep, target].double().mean()
+    return table
+
+
+def state_mean(table: torch.Tensor, phi: torch.Tensor, log_stress: torch.Tensor) -> torch.Tensor:
+    """The (G, 3) state-mean of ``state_table`` at each graph's (phi, log sigma): the trained area
+    fraction nearest to phi, linear in log sigma between its trained stresses (held constant beyond
+    them), per target over the state points where it is known."""
+    out = torch.empty((phi.shape[0], 3), dtype=torch.float64)
+    rows = table[torch.isfinite(table[:, 0])]
+    trained_phi = torch.unique(rows[:, 0])
+    nearest = trained_phi[torch.argmin((phi.double().view(-1, 1) - trained_phi.view(1, -1)).abs(), dim=1)]
+    for value in torch.unique(nearest):
+        graphs = nearest == value
+        at_phi = rows[rows[:, 0] == value]
+        for target in range(3):
+            known = at_phi[torch.isfinite(at_phi[:, 2 + target])]
+            known = known[torch.argsort(known[:, 1])]
+            x = np.interp(
+                log_stress[graphs].double().numpy(), known[:, 1].numpy(), known[:, 2 + target].numpy()
+            )
+            out[graphs, target] = torch.from_numpy(x)
+    return out
+
+
 def _spread(values: torch.Tensor) -> torch.Tensor:
     """Per-column standard deviation of (G, 3) training targets, 1 for a column without spread (e.g. Z_mu
     of frictionless training runs only): dividing by ~0 would blow the loss up to inf."""
@@ -217,6 +263,7 @@ class SurrogateModule(L.LightningModule):
         z_mu_input: int = -1,
         viscosity_input: int = -1,
         pressure_input: int = -1,
+        on_state_mean: bool = False,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -255,15 +302,34 @@ class SurrogateModule(L.LightningModule):
         # corrections to computed inputs).  Logging only, so not saved (checkpoints stay loadable).
         self.register_buffer("reference_std", torch.ones(3), persistent=False)
         self.register_buffer("loss_weights", torch.tensor(list(loss_weights), dtype=torch.float32))
+        if on_state_mean:
+            # the training folds' mean of each learned target per state point (fit_target_scaling):
+            # the network learns the deviation of a snapshot from it
+            self.register_buffer(
+                "state_table", torch.full((STATE_TABLE_ROWS, 5), float("nan"), dtype=torch.float64)
+            )
         self.huber = nn.SmoothL1Loss(beta=huber_beta, reduction="none")
         self._outputs = {"train": [], "val": [], "test": []}
 
-    def _learned(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        """Transformed targets (G, 3) -> the space the network learns in (before standardisation)."""
+    def _corrected_targets(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Transformed targets (G, 3) -> per stress and minus the computed inputs they correct."""
         out = pressure_in_stress_units(y, stress) if self.hparams.pressure_per_stress else y.clone()
         for target, column in self._corrected():
             out[:, target] = out[:, target] - u[:, column].to(out.dtype)
         return out
+
+    def _state_mean(self, phi: torch.Tensor, stress: torch.Tensor) -> torch.Tensor | None:
+        if not self.hparams.get("on_state_mean", False):
+            return None
+        return state_mean(self.state_table.cpu(), phi.cpu(), torch.log(stress.double()).cpu()).to(
+            stress.device
+        )
+
+    def _learned(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor, phi=None) -> torch.Tensor:
+        """Transformed targets (G, 3) -> the space the network learns in (before standardisation)."""
+        out = self._corrected_targets(y, stress, u)
+        mean = self._state_mean(phi, stress) if phi is not None else None
+        return out if mean is None else out - mean.to(out.dtype)
 
     def _corrected(self) -> list[tuple[int, int]]:
         """(target, graph-input column) pairs whose target is learned as a correction to the input."""
@@ -274,10 +340,21 @@ class SurrogateModule(L.LightningModule):
         ]
         return [(target, column) for target, column in pairs if column >= 0]
 
-    def fit_target_scaling(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> None:
+    def fit_target_scaling(
+        self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor, phi=None, jammed=None
+    ) -> None:
         """Standardisation of the learned targets, from the training graphs' transformed targets
-        ``y`` (G, 3), imposed stresses ``stress`` (G,) and graph inputs ``u`` (G, global_in)."""
-        learned = self._learned(y.double(), stress.double(), u.double())
+        ``y`` (G, 3), imposed stresses ``stress`` (G,) and graph inputs ``u`` (G, global_in); with
+        ``on_state_mean`` also the state-mean table, from their area fractions ``phi`` (G,) and
+        ``jammed`` flags (G,) (an arrested packing's eta_r is not averaged)."""
+        if self.hparams.get("on_state_mean", False):
+            if phi is None or jammed is None:
+                raise InputError("model.on_state_mean: fit_target_scaling needs phi and jammed")
+            scored = torch.ones_like(y, dtype=torch.bool)
+            scored[:, 0] = ~jammed.view(-1).bool()
+            corrected = self._corrected_targets(y.double(), stress.double(), u.double())
+            self.state_table.copy_(state_table(phi, torch.log(stress.double()), corrected, scored))
+        learned = self._learned(y.double(), stress.double(), u.double(), phi)
         self.target_mean.copy_(learned.mean(dim=0))
         self.target_std.copy_(_spread(learned))
         self.reference_std.copy_(_spread(y.double()))
@@ -288,6 +365,9 @@ class SurrogateModule(L.LightningModule):
     def _transformed(self, z: torch.Tensor, batch) -> torch.Tensor:
         """Standardised network output (G, 3) -> transformed targets (Pi in sigma0)."""
         learned = z * self.target_std + self.target_mean
+        mean = self._state_mean(batch.phi.view(-1), batch.stress.view(-1))
+        if mean is not None:
+            learned = learned + mean.to(learned.dtype)
         corrected = self._corrected()
         if corrected:
             learned = learned.clone()
@@ -305,7 +385,8 @@ class SurrogateModule(L.LightningModule):
 
     def _step(self, batch, stage: str):
         z = self._net(batch)
-        target = (self._learned(batch.y, batch.stress.view(-1), batch.u) - self.target_mean) / self.target_std
+        learned = self._learned(batch.y, batch.stress.view(-1), batch.u, batch.phi.view(-1))
+        target = (learned - self.target_mean) / self.target_std
         # a shear-jammed run has no viscosity (its apparent eta_r diverges): its snapshots train Pi and
         # Z_mu (the loaded static packing) but never eta_r
         scored = torch.ones_like(target)

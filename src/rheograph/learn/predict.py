@@ -76,7 +76,37 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
     graph = dict(bundle["graph"])
     graph["edge_features"] = tuple(graph["edge_features"])
     graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
+    graph["noise_range"] = tuple(graph.get("noise_range", ()))
     return module, GraphSettings(**graph), bundle["domain"]
+
+
+def trained_noise(domain: dict) -> tuple[float, float]:
+    """(eps_min, eps_max) [a] of the position noise a model was trained on; exact models (0, 0)."""
+    noise = domain.get("position_noise", 0.0)
+    return (float(noise[0]), float(noise[1])) if isinstance(noise, list | tuple) else (0.0, float(noise))
+
+
+def noise_reason(domain: dict, noise: float) -> str:
+    """Why positions of RMS precision ``noise`` [a] are outside a model's domain ('' if they are not).
+    An exact model reads overlaps of ~1e-3 a: precision worse than EXACT_POSITION_PRECISION is outside;
+    an imaging model is outside above its trained eps_max (below its eps_min it is used on cleaner
+    positions than it saw, which the exact model serves better)."""
+    low, high = trained_noise(domain)
+    if high == 0.0:
+        if noise > EXACT_POSITION_PRECISION:
+            return (
+                f"positions known to {noise:.2g} a, the model was trained on exact positions (it reads "
+                "overlaps of ~1e-3 a): use an imaging model (predict.py --list-models)"
+            )
+        return ""
+    if noise > high:
+        return f"positions known to {noise:.2g} a, beyond the {high:g} a of the model's noisy training"
+    if noise < low and noise <= EXACT_POSITION_PRECISION:
+        return (
+            f"positions known to {noise:.2g} a, below the {low:g} a of the model's noisy training: the "
+            "exact model of this suspension is more accurate on them"
+        )
+    return ""
 
 
 def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tuple[np.ndarray, list[str]]:
@@ -90,16 +120,9 @@ def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tupl
             reasons.append(f"{key} = {value:g} outside the trained [{low:g}, {high:g}]")
     if snaps.n_particles not in domain["n_particles"]:
         reasons.append(f"N = {snaps.n_particles} not among the trained N {domain['n_particles']}")
-    trained_noise = float(domain.get("position_noise", 0.0))
-    if snaps.position_noise > max(trained_noise, EXACT_POSITION_PRECISION):
-        reasons.append(
-            f"positions known to {snaps.position_noise:.2g} a, the model was trained on "
-            + (
-                "exact positions (it reads overlaps of ~1e-3 a)"
-                if not trained_noise
-                else f"{trained_noise:g} a"
-            )
-        )
+    reason = noise_reason(domain, snaps.position_noise or 0.0)
+    if reason:
+        reasons.append(reason)
     flags = np.full(len(graphs), not reasons)
     low, high = np.array(domain["edge_min"]), np.array(domain["edge_max"])
     span = np.maximum(high - low, 1e-12)
@@ -241,7 +264,7 @@ class Surrogate:
         phi: float,
         *,
         strain=None,
-        position_noise: float = 0.0,
+        position_noise: float | None = None,
         eta_r=None,
         pressure=None,
         z_mu=None,
@@ -253,7 +276,8 @@ class Surrogate:
         periodic image above), ``stress`` σ/σ0, ``phi``, and the physical parameters as keyword
         arguments named as the ``sim.*`` keys (``mu``, ``kn_coefficient``, ``kt_ratio``, ``delta``,
         ``lub_max_gap``).  Optional: ``strain`` and the true ``eta_r``, ``pressure``, ``z_mu`` (S,) for the
-        ``*_sim`` columns; ``position_noise`` [a], the positions' precision.  Returns one row per
+        ``*_sim`` columns; ``position_noise`` [a], the positions' RMS precision per coordinate (an
+        imaging model needs it; exact models take unstated positions as exact).  Returns one row per
         configuration as a dict of columns (``pandas.DataFrame(table)`` makes a data frame)."""
         unknown = sorted(set(params) - set(PHYSICAL_PARAMS))
         if unknown:
@@ -361,6 +385,12 @@ def main(argv=None) -> None:
         "--param", action="append", default=[], metavar="KEY=VALUE", help="a physical parameter of the inputs"
     )
     ap.add_argument(
+        "--position-noise",
+        type=float,
+        metavar="EPS",
+        help="RMS precision of the input positions per coordinate [a] (overrides what the inputs state)",
+    )
+    ap.add_argument(
         "--accept-mismatch",
         action="store_true",
         help="predict for inputs of another suspension than the model's (flagged out of domain)",
@@ -372,7 +402,7 @@ def main(argv=None) -> None:
             d = card["domain"]
             print(
                 f"{name}: phi {d['phi'][0]:g}-{d['phi'][1]:g}, sigma/sigma0 {d['stress'][0]:g}-"
-                f"{d['stress'][1]:g}, N {d['n_particles']}, position noise {card['position_noise']:g} a"
+                f"{d['stress'][1]:g}, N {d['n_particles']}, position noise {card['position_noise']} a"
             )
         return
     for name in ("models", "input", "out"):
@@ -388,9 +418,13 @@ def main(argv=None) -> None:
         snaps = read_snapshots(path, args.lfdem_params)
         if given:
             snaps.params = {**snaps.params, **given}
+        if args.position_noise is not None:
+            snaps.position_noise = args.position_noise
         tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
     table = concatenate(tables)
     header = {"model": model.label, "inputs": " ".join(args.input)}
+    if args.position_noise is not None:
+        header["position_noise"] = f"{args.position_noise:g}"
     if given:
         header["parameters given"] = ", ".join(f"{k}={v:g}" for k, v in given.items())
     if args.accept_mismatch:

@@ -67,6 +67,7 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
     values = OmegaConf.to_container(cfg.graph, resolve=True)
     values["edge_features"] = tuple(values["edge_features"])
     values["graph_inputs"] = tuple(values.get("graph_inputs", ()))
+    values["noise_range"] = tuple(values.get("noise_range", ()))
     return GraphSettings(**values)
 
 
@@ -89,6 +90,7 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
                 **settings.__dict__,
                 "edge_features": list(settings.edge_features),
                 "graph_inputs": list(settings.graph_inputs),
+                "noise_range": list(settings.noise_range),
             },
             "fold": fold,
             "split": split,
@@ -128,7 +130,13 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         _convert_="all",
     )
     train = torch.as_tensor(dm.train_idx)
-    module.fit_target_scaling(dm.dataset.y[train], dm.dataset.stress[train], dm.dataset.u[train])
+    module.fit_target_scaling(
+        dm.dataset.y[train],
+        dm.dataset.stress[train],
+        dm.dataset.u[train],
+        phi=dm.dataset.phi[train],
+        jammed=dm.dataset.jammed[train],
+    )
     module.net.set_edge_scaling(dm.edge_mean, dm.edge_std)
     return dm, module
 
@@ -187,7 +195,7 @@ def train_fold(
     if not np.isfinite(best_val):
         raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
     test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
-    pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
+    pred, true, meta = predict_dataset(module, dm.graphs(dm.test_idx))
     fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
     baselines = baseline_predictions(
         dataset_arrays(dm.dataset, fitted),

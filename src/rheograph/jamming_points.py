@@ -1,0 +1,332 @@
+"""Where the suspension jams: the frictionless and frictional jamming area fractions from steady flow.
+
+    python -m rheograph.jamming_points data/paper/index.json data/jamming/index.json \\
+        --out docs/jamming.md --figure docs/figures/phase_diagram.png
+
+Two fits of the steady relative viscosity of every finished trajectory (``summary/viscosity``, strain
+>= 1), per system size N, each with a bootstrap over trajectories (resampled within each state point):
+
+* **Divergence on a branch**: eta_r = A (phi_J - phi)^(-beta) on the frictionless branch (mu = 0 runs,
+  and the frictional set's runs at sigma/sigma0 <= 0.5 whose Z_mu is below 0.02: no contact there
+  reaches the critical load) -> phi_J^0; and on the high-stress plateau (the largest stress of the set,
+  friction saturated) -> phi_J^mu.  beta fixed at 2 and fitted.
+* **Wyart–Cates** over every flowing state point: eta_r = A (1 - phi / phi_m)^(-2) with
+  phi_m = f phi_J^mu + (1 - f) phi_J^0 and f = Z_mu / Z, the measured fraction of frictional contacts of
+  each trajectory (not a model of f(sigma)).
+
+Jammed runs have no viscosity and enter neither fit; the phase diagram marks them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from rheograph.errors import InputError, one_line_errors
+
+FRICTIONLESS_Z_MU = 0.02  # a sigma <= 0.5 run below this frictional coordination is on the mu = 0 branch
+BOOTSTRAP = 400
+
+
+def read_runs(index_paths) -> list[dict]:
+    """One record per trajectory of the indexes: N, phi, sigma/sigma0, seed, mu, status, steady eta_r,
+    Z_mu, Z (NaN where the run did not flow)."""
+    runs = []
+    for path in index_paths:
+        try:
+            index = json.loads(Path(path).read_text())
+        except (OSError, ValueError) as exc:
+            raise InputError(
+                f"{path}: not a readable run index ({exc}); make one with rheograph.collect"
+            ) from exc
+        for entry in index.get("runs", []):
+            p, s = entry["params"], entry.get("summary") or {}
+            runs.append(
+                {
+                    "n": int(p["n_particles"]),
+                    "phi": float(p["phi"]),
+                    "stress": float(p["stress"]),
+                    "seed": int(p["seed"]),
+                    "mu": float(p["mu"]),
+                    "status": entry["status"],
+                    "eta": float(s.get("viscosity") or np.nan),
+                    "z_mu": float(s.get("z_mu") if s.get("z_mu") is not None else np.nan),
+                    "z": float(s.get("z") if s.get("z") is not None else np.nan),
+                }
+            )
+    return runs
+
+
+def flowing(run: dict) -> bool:
+    return run["status"] == "completed" and np.isfinite(run["eta"]) and run["eta"] > 0
+
+
+def frictionless_branch(runs: list[dict], n: int) -> list[dict]:
+    return [
+        r
+        for r in runs
+        if r["n"] == n
+        and flowing(r)
+        and (r["mu"] == 0.0 or (r["stress"] <= 0.5 and r["z_mu"] < FRICTIONLESS_Z_MU))
+    ]
+
+
+def plateau_branch(runs: list[dict], n: int) -> tuple[list[dict], float]:
+    """Flowing frictional runs at the largest stress of the set at this N, and that stress."""
+    frictional = [r for r in runs if r["n"] == n and r["mu"] > 0]
+    if not frictional:
+        return [], np.nan
+    top = max(r["stress"] for r in frictional)
+    return [r for r in frictional if r["stress"] == top and flowing(r)], top
+
+
+def fit_divergence(phi, eta, beta: float | None = None) -> dict:
+    """Least squares in log eta_r of eta_r = A (phi_J - phi)^(-beta) (beta fitted when None)."""
+    phi, log_eta = np.asarray(phi, float), np.log(np.asarray(eta, float))
+    if np.unique(phi).size < (3 if beta is None else 2):
+        raise InputError(f"a divergence fit needs at least {3 if beta is None else 2} area fractions")
+    top = phi.max()
+
+    def residual(x):
+        phi_j, log_a = x[0], x[1]
+        b = beta if beta is not None else x[2]
+        return log_eta - (log_a - b * np.log(phi_j - phi))
+
+    x0 = [top + 0.02, 0.0] + ([2.0] if beta is None else [])
+    lower = [top + 1e-5, -np.inf] + ([0.1] if beta is None else [])
+    upper = [1.0, np.inf] + ([10.0] if beta is None else [])
+    fit = least_squares(residual, x0, bounds=(lower, upper))
+    out = {"phi_j": float(fit.x[0]), "prefactor": float(np.exp(fit.x[1]))}
+    out["beta"] = float(beta if beta is not None else fit.x[2])
+    out["rms_log"] = float(np.sqrt(np.mean(fit.fun**2)))
+    return out
+
+
+def wyart_cates(f, phi_0, phi_mu):
+    """phi_m = f phi_mu + (1 - f) phi_0: the jamming fraction at a frictional-contact fraction f."""
+    return f * phi_mu + (1.0 - f) * phi_0
+
+
+def fit_wyart_cates(phi, f, eta) -> dict:
+    """Least squares in log eta_r of eta_r = A (1 - phi / phi_m(f))^(-2), phi_m of ``wyart_cates``."""
+    phi, f, log_eta = (np.asarray(v, float) for v in (phi, f, eta))
+    log_eta = np.log(log_eta)
+
+    def residual(x):
+        phi_m = wyart_cates(f, x[0], x[1])
+        gap = np.maximum(1.0 - phi / phi_m, 1e-9)
+        return log_eta - (x[2] - 2.0 * np.log(gap))
+
+    fit = least_squares(residual, [0.84, 0.80, 0.0], bounds=([0.5, 0.5, -np.inf], [1.0, 1.0, np.inf]))
+    return {
+        "phi_j0": float(fit.x[0]),
+        "phi_jmu": float(fit.x[1]),
+        "prefactor": float(np.exp(fit.x[2])),
+        "rms_log": float(np.sqrt(np.mean(fit.fun**2))),
+    }
+
+
+def bootstrap(runs: list[dict], fit, keys, rng, n_boot: int = BOOTSTRAP) -> dict:
+    """(median, 16th, 84th percentile) of ``fit(runs)[key]`` over trajectories resampled with replacement
+    within each (phi, sigma) state point."""
+    groups: dict = {}
+    for r in runs:
+        groups.setdefault((r["phi"], r["stress"], r["mu"]), []).append(r)
+    values = {k: [] for k in keys}
+    for _ in range(n_boot):
+        sample = [g[i] for g in groups.values() for i in rng.integers(0, len(g), len(g))]
+        try:
+            result = fit(sample)
+        except InputError:
+            continue
+        for k in keys:
+            values[k].append(result[k])
+    return {k: tuple(float(q) for q in np.percentile(v, [50, 16, 84])) for k, v in values.items()}
+
+
+def near(branch: list[dict], window: float) -> list[dict]:
+    """The runs of a branch within ``window`` below its highest flowing area fraction: a power law holds
+    only close to the divergence (far below it eta_r grows more slowly, and a fit over the whole range
+    returns a smaller exponent and a different phi_J)."""
+    if not branch:
+        return branch
+    top = max(r["phi"] for r in branch)
+    return [r for r in branch if r["phi"] >= top - window - 1e-9]
+
+
+def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list[dict]:
+    """Fit rows per N (method, branch, phi_J with its 68 % bootstrap interval, beta, rms); the
+    divergence fits use the area fractions within ``window`` of the branch's highest (``near``)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for n in sorted({r["n"] for r in runs}):
+        branches = [
+            (
+                "phi_J^0",
+                "frictionless (mu = 0; sigma/sigma0 <= 0.5 with Z_mu < 0.02)",
+                frictionless_branch(runs, n),
+            )
+        ]
+        plateau, top = plateau_branch(runs, n)
+        branches.append(("phi_J^mu", f"high-stress plateau (sigma/sigma0 = {top:g})", plateau))
+        for name, label, branch in branches:
+            branch = near(branch, window)
+            if len({r["phi"] for r in branch}) < 3:
+                continue
+            phi = [r["phi"] for r in branch]
+            eta = [r["eta"] for r in branch]
+            for beta in (2.0, None):
+                fit = fit_divergence(phi, eta, beta)
+                spread = bootstrap(
+                    branch,
+                    lambda s, b=beta: fit_divergence([r["phi"] for r in s], [r["eta"] for r in s], b),
+                    ["phi_j", "beta"],
+                    rng,
+                )
+                rows.append(
+                    {
+                        "n": n,
+                        "quantity": name,
+                        "method": "divergence, beta = 2" if beta else "divergence, beta fitted",
+                        "data": label,
+                        "trajectories": len(branch),
+                        "phi_range": (min(phi), max(phi)),
+                        "phi_j": fit["phi_j"],
+                        "phi_j_ci": spread["phi_j"][1:],
+                        "beta": fit["beta"],
+                        "beta_ci": spread["beta"][1:] if beta is None else None,
+                        "rms_log": fit["rms_log"],
+                    }
+                )
+        everything = [r for r in runs if r["n"] == n and flowing(r) and np.isfinite(r["z_mu"]) and r["z"] > 0]
+        if len({r["phi"] for r in everything}) >= 3 and any(r["z_mu"] > 0 for r in everything):
+
+            def wc(sample):
+                return fit_wyart_cates(
+                    [r["phi"] for r in sample],
+                    [r["z_mu"] / r["z"] for r in sample],
+                    [r["eta"] for r in sample],
+                )
+
+            fit = wc(everything)
+            spread = bootstrap(everything, wc, ["phi_j0", "phi_jmu"], rng)
+            for name, key in (("phi_J^0", "phi_j0"), ("phi_J^mu", "phi_jmu")):
+                rows.append(
+                    {
+                        "n": n,
+                        "quantity": name,
+                        "method": "Wyart–Cates, f = Z_mu / Z",
+                        "data": "every flowing state point",
+                        "trajectories": len(everything),
+                        "phi_range": (min(r["phi"] for r in everything), max(r["phi"] for r in everything)),
+                        "phi_j": fit[key],
+                        "phi_j_ci": spread[key][1:],
+                        "beta": 2.0,
+                        "beta_ci": None,
+                        "rms_log": fit["rms_log"],
+                        "wyart_cates": fit,
+                    }
+                )
+    return rows
+
+
+def markdown(rows: list[dict], command: str) -> str:
+    lines = [
+        "| N | quantity | method | data | trajectories | φ range | φ_J (68 % bootstrap) | β | rms log η_r |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        low, high = r["phi_j_ci"]
+        beta = f"{r['beta']:.2f}" + (
+            f" ({r['beta_ci'][0]:.2f}–{r['beta_ci'][1]:.2f})" if r["beta_ci"] else ""
+        )
+        lines.append(
+            f"| {r['n']} | {r['quantity']} | {r['method']} | {r['data']} | {r['trajectories']} | "
+            f"{r['phi_range'][0]:g}–{r['phi_range'][1]:g} | {r['phi_j']:.4f} ({low:.4f}–{high:.4f}) | "
+            f"{beta} | {r['rms_log']:.3f} |"
+        )
+    lines += ["", f"Command: `{command}`"]
+    return "\n".join(lines)
+
+
+def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
+    """(phi, sigma/sigma0) plane: flowing and jammed state points per N, and the Wyart–Cates jamming line
+    phi_m(f(sigma)) with f the mean measured Z_mu / Z per stress."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = sorted({r["n"] for r in runs})
+    fig, axes = plt.subplots(1, len(sizes), figsize=(4.2 * len(sizes), 3.8), squeeze=False, sharey=True)
+    for ax, n in zip(axes[0], sizes):
+        frictional = [r for r in runs if r["n"] == n and r["mu"] > 0]
+        for status, marker, color, label in (
+            ("completed", "o", "tab:blue", "flows"),
+            ("jammed", "x", "tab:red", "shear-jammed"),
+        ):
+            pts = [(r["phi"], r["stress"]) for r in frictional if r["status"] == status]
+            if pts:
+                p, s = np.array(pts).T
+                ax.scatter(p, s, marker=marker, color=color, s=22, label=label, alpha=0.6)
+        fit = next((r["wyart_cates"] for r in rows if r["n"] == n and "wyart_cates" in r), None)
+        if fit:
+            stresses = sorted({r["stress"] for r in frictional if flowing(r)})
+            f = [
+                np.nanmean([r["z_mu"] / r["z"] for r in frictional if r["stress"] == s and flowing(r)])
+                for s in stresses
+            ]
+            ax.plot(
+                wyart_cates(np.array(f), fit["phi_j0"], fit["phi_jmu"]),
+                stresses,
+                "k-",
+                label="φ_m(f), Wyart–Cates",
+            )
+            ax.axvline(fit["phi_j0"], color="0.5", ls=":", label=f"φ_J^0 = {fit['phi_j0']:.3f}")
+            ax.axvline(fit["phi_jmu"], color="0.5", ls="--", label=f"φ_J^μ = {fit['phi_jmu']:.3f}")
+        ax.set_xscale("linear")
+        ax.set_yscale("log")
+        ax.set_xlabel("φ")
+        ax.set_title(f"N = {n}")
+    axes[0][0].set_ylabel("σ / σ0")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("indexes", nargs="+", help="run indexes (python -m rheograph.collect)")
+    ap.add_argument("--out", help="markdown table (default: print)")
+    ap.add_argument("--figure", help="phase-diagram PNG")
+    ap.add_argument("--seed", type=int, default=0, help="bootstrap seed")
+    ap.add_argument(
+        "--window", type=float, default=0.05, help="divergence fits: area fractions within this of the top"
+    )
+    args = ap.parse_args(argv)
+    if not 0.0 < args.window < 0.5:
+        raise InputError(f"--window {args.window}: allowed 0 < window < 0.5")
+    runs = read_runs(args.indexes)
+    rows = jamming_table(runs, args.seed, args.window)
+    if not rows:
+        raise InputError(f"{args.indexes}: no branch with three area fractions of flowing runs to fit")
+    command = "python -m rheograph.jamming_points " + " ".join(argv if argv is not None else sys.argv[1:])
+    text = markdown(rows, command)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+    else:
+        print(text)
+    if args.figure:
+        plot_phase_diagram(runs, rows, Path(args.figure))
+
+
+if __name__ == "__main__":
+    with one_line_errors("python -m rheograph.jamming_points"):
+        main()

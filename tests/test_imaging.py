@@ -1,0 +1,240 @@
+"""Imprecise snapshots: the gap-shell inputs, graphs rebuilt from re-noised positions, the relaxation of
+a noisy configuration, the noise domain of a model and the imaging model end to end."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rheograph.errors import InputError
+from rheograph.graphs.dataset import GraphSettings, NoisyGraphs, snapshot_graphs
+from rheograph.graphs.features import (
+    SHELL_INPUTS,
+    SHELL_WIDTHS,
+    relax_positions,
+    shell_inputs,
+    snapshot_pairs,
+)
+from rheograph.io.snapshots import read_snapshots, wrap_into_box
+
+IMAGING = dict(
+    edge_features=("gap", "dx", "dy", "nxny", "nxx_nyy"),
+    graph_inputs=("log_stress", "position_noise", *SHELL_INPUTS),
+    pressure_per_stress=True,
+    noise_range=(1e-3, 0.03),
+    min_strain=0.05,
+)
+
+
+def brute_force_pairs(positions, radii, lx, ly, offset):
+    """Every pair's surface gap and unit normal by the minimum image over all pairs (O(N^2))."""
+    n = radii.size
+    i, j = np.triu_indices(n, 1)
+    d = positions[j] - positions[i]
+    images = np.round(d[:, 1] / ly)
+    d[:, 0] -= images * offset
+    d[:, 1] -= images * ly
+    d[:, 0] -= np.round(d[:, 0] / lx) * lx
+    r = np.hypot(d[:, 0], d[:, 1])
+    return r - radii[i] - radii[j], d / r[:, None]
+
+
+def test_shell_inputs_are_the_brute_force_pair_counts_and_fabric(tiny_files):
+    snaps = read_snapshots(tiny_files[1])
+    k = len(snaps) - 1
+    pos, offset = snaps.positions[k], snaps.le_offset[k]
+    pairs = snapshot_pairs(pos, snaps.radii, snaps.lx, snaps.ly, offset, 0.5, snaps.graph_params())
+    got = shell_inputs(pairs, snaps.n_particles)
+    gap, n = brute_force_pairs(pos, snaps.radii, snaps.lx, snaps.ly, offset)
+    for w in SHELL_WIDTHS:
+        inside = gap < w
+        assert got[f"shell_pairs_{w:g}"] == pytest.approx(2 * inside.sum() / snaps.n_particles)
+        assert got[f"shell_fabric_{w:g}"] == pytest.approx(np.mean(n[inside, 0] * n[inside, 1]))
+        assert got[f"shell_normal_{w:g}"] == pytest.approx(np.mean(n[inside, 0] ** 2 - n[inside, 1] ** 2))
+    # under shear the near-contact network is compressive along the 135 degree axis: n_x n_y < 0
+    assert got["shell_fabric_0.03"] < 0
+    assert got["shell_pairs_0.01"] < got["shell_pairs_0.03"] < got["shell_pairs_0.1"] < got["shell_pairs_0.3"]
+
+
+def test_noisy_graphs_redraw_fresh_noise_and_keep_targets(tiny_files):
+    settings = GraphSettings(**IMAGING)
+    snaps = read_snapshots(tiny_files[2])
+    graphs = snapshot_graphs(snaps, settings, run_id=0)
+    params = {0: snaps.graph_params()}
+    fixed = NoisyGraphs(graphs, settings, params, fresh=False, seed=3)
+    fresh = NoisyGraphs(graphs, settings, params, fresh=True)
+    a, b = fixed[1], fixed[1]
+    assert np.array_equal(a.pos.numpy(), b.pos.numpy())  # validation: one draw per graph
+    c, d = fresh[1], fresh[1]
+    assert not np.array_equal(c.pos.numpy(), d.pos.numpy())  # training: new noise every access
+    noise_column = settings.graph_inputs.index("position_noise")
+    for g in (a, c, d):
+        eps = float(g.u[0, noise_column])
+        assert 1e-3 <= eps <= 0.03
+        assert np.array_equal(g.y_raw.numpy(), graphs[1].y_raw.numpy())
+        # the positions moved by eps per coordinate (RMS), up to the wrap into the box
+        moved = g.pos.numpy() - graphs[1].pos.numpy()
+        moved[:, 0] -= np.round(moved[:, 0] / snaps.lx) * snaps.lx
+        moved[:, 1] -= np.round(moved[:, 1] / snaps.ly) * snaps.ly
+        assert np.sqrt(np.mean(moved**2)) == pytest.approx(eps, rel=0.15)
+    # a vanishing noise rebuilds the exact graph
+    still = NoisyGraphs(graphs, dataclasses.replace(settings, noise_range=(1e-12, 1e-12)), params, fresh=True)
+    exact, rebuilt = graphs[1], still[1]
+    assert np.array_equal(exact.edge_index.numpy(), rebuilt.edge_index.numpy())
+    assert np.allclose(exact.edge_attr.numpy(), rebuilt.edge_attr.numpy(), atol=1e-6)
+    assert np.allclose(exact.u.numpy()[0, 2:], rebuilt.u.numpy()[0, 2:], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(noise_range=(0.01,)), "noise_range"),
+        (dict(noise_range=(0.05, 0.01)), "eps_min <= eps_max"),
+        (dict(noise_range=(0.0, 0.01)), "0 < eps_min"),
+        (dict(graph_inputs=("log_stress", "solve_viscosity")), "drop solve_viscosity"),
+        (dict(edge_features=("gap", "sliding")), "contact history"),
+        (dict(cutoff=0.2), "widest gap shell"),
+    ],
+)
+def test_imaging_settings_are_checked_by_name(change, message):
+    with pytest.raises(InputError, match=message):
+        GraphSettings(**{**IMAGING, **change})
+
+
+def test_a_short_shear_relaxes_the_overlaps_that_noise_creates(tiny_files):
+    snaps = read_snapshots(tiny_files[1])
+    params = {**snaps.graph_params(), **snaps.numerics}
+    k = len(snaps) - 1
+    rng = np.random.default_rng(0)
+    noisy = wrap_into_box(
+        snaps.positions[k] + rng.normal(0.0, 0.01, snaps.positions[k].shape),
+        snaps.lx,
+        snaps.ly,
+        snaps.le_offset[k],
+    )
+
+    def largest_overlap(pos, offset):  # units of delta_sigma
+        return snapshot_pairs(pos, snaps.radii, snaps.lx, snaps.ly, offset, 0.5, params)["overlap"].max()
+
+    exact = largest_overlap(snaps.positions[k], snaps.le_offset[k])
+    relaxed, offset = relax_positions(
+        noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k], params, 0.05
+    )
+    # noise of 0.01 a makes overlaps of ~30x those the springs hold; a short stretch of the flow brings
+    # them back to the simulator's own (here, phi = 0.72: 36 -> 7.7 / 2.4 / 0.8 delta_sigma after 0.01 /
+    # 0.02 / 0.05 strain, exact 0.95; at phi = 0.76, N = 400, 0.01 suffices: 48 -> 1.5, exact 1.5)
+    assert largest_overlap(noisy, snaps.le_offset[k]) > 5 * exact
+    assert largest_overlap(relaxed, offset) < 2 * exact
+    # the box was sheared by the strain asked for (the image offset moved by about 0.05 Ly)
+    moved = (offset - snaps.le_offset[k]) % snaps.lx
+    assert 0.05 * snaps.ly <= moved < 0.055 * snaps.ly
+
+
+def test_noise_domain_of_exact_and_imaging_models():
+    from rheograph.learn.predict import noise_reason
+
+    exact = {"position_noise": 0.0}
+    imaging = {"position_noise": [1e-4, 0.05]}
+    assert noise_reason(exact, 2.2e-5) == ""  # LF_DEM's 6-digit rounding
+    assert "use an imaging model" in noise_reason(exact, 0.01)
+    assert noise_reason(imaging, 0.01) == ""
+    assert "beyond the 0.05 a" in noise_reason(imaging, 0.1)
+    assert "exact model" in noise_reason(imaging, 0.0)
+
+
+def test_imaging_model_end_to_end_needs_the_noise_level(tiny_files, tmp_path):
+    """Trains a tiny imaging model through train.py and predicts bare snapshots with it."""
+    from conftest import ROOT, tiny_training_overrides
+    from hydra import compose, initialize_config_dir
+
+    from rheograph.learn.predict import load_model
+    from rheograph.learn.train import train_folds
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(
+            "train",
+            overrides=[
+                "graph=imaging",
+                *tiny_training_overrides(tiny_files, tmp_path),
+                "trainer.max_epochs=2",
+                "trainer.enable_progress_bar=false",
+                "~logger",
+                "report=false",
+                "fold=0",
+            ],
+        )
+    train_folds(cfg, tmp_path / "run")
+    model = load_model(tmp_path / "run")
+    snaps = read_snapshots(tiny_files[2])
+    values = dict(
+        positions=snaps.positions[-2:], radii=snaps.radii, box=[snaps.lx, snaps.ly],
+        le_offset=snaps.le_offset[-2:], stress=snaps.stress, phi=snaps.phi,
+        mu=0.5, kn_coefficient=2e4, kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5,
+    )  # fmt: skip
+    with pytest.raises(InputError, match="position_noise"):
+        model.predict(**values)
+    inside = model.predict(**values, position_noise=0.01)
+    assert inside["in_domain"].tolist() == [1, 1] and np.isfinite(inside["eta_pred"]).all()
+    beyond = model.predict(**values, position_noise=0.2)
+    assert beyond["in_domain"].tolist() == [0, 0] and "beyond the 0.05 a" in beyond["notes"][0]
+    # the noise level is an input: the prediction depends on it
+    assert not np.allclose(inside["eta_pred"], beyond["eta_pred"])
+
+
+def test_state_mean_table_interpolates_in_log_stress_at_the_nearest_phi():
+    import torch
+
+    from rheograph.learn.module import state_mean, state_table
+
+    phi = torch.tensor([0.76, 0.76, 0.76, 0.76, 0.80, 0.80])
+    stress = torch.tensor([1.0, 1.0, 10.0, 100.0, 1.0, 100.0])
+    values = torch.tensor(
+        [
+            [1.0, 2.0, 0.0],
+            [3.0, 4.0, 0.2],
+            [5.0, 6.0, 1.0],
+            [7.0, 8.0, 2.0],
+            [9.0, 1.0, 0.5],
+            [11.0, 2.0, 2.5],
+        ]
+    )
+    scored = torch.ones_like(values, dtype=torch.bool)
+    scored[5, 0] = False  # an arrested packing: no eta_r at (0.80, 100)
+    table = state_table(phi, torch.log(stress), values, scored)
+    query_phi = torch.tensor([0.761, 0.76, 0.79, 0.80, 0.76])
+    query_stress = torch.tensor([1.0, np.sqrt(10.0), 100.0, 10.0, 1000.0])
+    got = state_mean(table, query_phi, torch.log(query_stress)).numpy()
+    assert np.allclose(got[0], [2.0, 3.0, 0.1])  # mean of the two snapshots at (0.76, 1)
+    assert np.allclose(got[1], [3.5, 4.5, 0.55])  # halfway in log sigma between 1 and 10
+    # phi 0.79 -> the nearest trained phi 0.80; eta_r known there only at sigma = 1
+    assert np.allclose(got[2], [9.0, 2.0, 2.5])
+    assert np.allclose(got[3], [9.0, 1.5, 1.5])
+    assert np.allclose(got[4], [7.0, 8.0, 2.0])  # held constant beyond the trained stresses
+
+
+def test_a_model_on_the_state_mean_predicts_the_lookup_when_its_network_says_nothing(tiny_files):
+    import torch
+    from torch_geometric.loader import DataLoader
+
+    from rheograph.learn.module import SurrogateModule
+
+    settings = GraphSettings(**IMAGING)
+    graphs = [g for f in tiny_files for g in snapshot_graphs(read_snapshots(f), settings, run_id=0)]
+    batch = next(iter(DataLoader(graphs, batch_size=len(graphs))))
+    module = SurrogateModule(
+        edge_in=len(settings.edge_features), global_in=len(settings.graph_inputs), pressure_per_stress=True,
+        on_state_mean=True,
+    )  # fmt: skip
+    module.fit_target_scaling(batch.y, batch.stress, batch.u, phi=batch.phi, jammed=batch.jammed)
+    # the standardised output z = -mean/std is a learned value of 0: the prediction is the state mean
+    zero = (-module.target_mean / module.target_std).expand(len(graphs), 3).float()
+    pred = module._transformed(zero, batch).double()
+    for stress in np.unique(batch.stress.numpy()):
+        at = batch.stress.numpy() == stress
+        y = batch.y.double()[at]
+        assert torch.allclose(pred[at, 0], y[:, 0].mean().expand(int(at.sum())), atol=1e-5)
+        assert torch.allclose(pred[at, 2], y[:, 2].mean().expand(int(at.sum())), atol=1e-5)
+        # Pi: the mean of asinh(Pi / (s sigma)), mapped back to sigma0
+        per_stress = torch.asinh(torch.sinh(y[:, 1]) / stress)
+        expected = torch.asinh(torch.sinh(per_stress.mean()) * stress)
+        assert torch.allclose(pred[at, 1], expected.expand(int(at.sum())), atol=1e-5)
