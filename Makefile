@@ -11,7 +11,7 @@ export OMP_WAIT_POLICY ?= PASSIVE
 SYSTEM_PACKAGES := libsuitesparse-dev libopenblas0-serial
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: install system-packages demo test test-slow lint
+.PHONY: install system-packages demo test test-slow lint docs
 
 install: $(VENV)/.installed
 
@@ -45,6 +45,15 @@ test: install
 # the long tests (N = 400 runs against LF_DEM's series, dense high-stress runs): CI runs them after `test`
 test-slow: install
 	$(PY) -m pytest -q -m slow
+
+# the documentation (mkdocs + mkdocstrings; reference pages generated from the code), into site/: warnings
+# and broken links fail the build
+docs: $(VENV)/.docs-installed
+	$(VENV)/bin/mkdocs build --strict
+
+$(VENV)/.docs-installed: $(VENV)/.installed
+	$(PY) -m pip install -e ".[docs]"
+	touch $@
 
 lint: install
 	$(VENV)/bin/ruff check src tests bench *.py

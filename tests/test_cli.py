@@ -94,3 +94,41 @@ def test_scheme_labels_round_trip_and_name_runs_apart():
             assert scheme_settings(label) == {"integrator": integrator, "lagged_step_control": lagged}
             names.add(run_name(SimParams(**scheme_settings(label))))
     assert len(names) == 4  # a lagged run never resumes a default run's file
+
+
+def test_rheograph_command_runs_the_entry_points_outside_the_repository(tmp_path):
+    """The console script composes the configuration shipped inside the package from any folder."""
+    import subprocess
+    import sys
+
+    def run(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "rheograph.console", *args], cwd=tmp_path, capture_output=True, text=True
+        )
+
+    simulate = run("simulate", "--cfg", "job")
+    assert simulate.returncode == 0 and "integrator: implicit" in simulate.stdout
+    train = run("train", "experiment=imaging", "--cfg", "job")
+    assert train.returncode == 0 and "on_state_mean: true" in train.stdout
+    bad = run("simulate", "sim.phi=2")
+    assert bad.returncode != 0 and bad.stderr.strip().splitlines()[-1].startswith(
+        "rheograph simulate: error:"
+    )
+    unknown = run("simulat")
+    assert unknown.returncode == 2 and "unknown command 'simulat'" in unknown.stderr
+
+
+def test_every_shipped_fold_bundle_has_a_lightning_checkpoint_beside_it():
+    import torch
+
+    from rheograph.learn.module import SurrogateModule
+    from rheograph.learn.registry import MODELS_DIR, list_models
+
+    for name in list_models():
+        bundles = sorted((MODELS_DIR / name).glob("fold*.pt"))
+        assert bundles and all(b.with_suffix(".ckpt").is_file() for b in bundles), name
+    bundle = torch.load(MODELS_DIR / "N400_phi0.76" / "fold2.pt", map_location="cpu", weights_only=True)
+    module = SurrogateModule.load_from_checkpoint(
+        MODELS_DIR / "N400_phi0.76" / "fold2.ckpt", map_location="cpu"
+    )
+    assert all(torch.equal(v, module.state_dict()[k]) for k, v in bundle["state_dict"].items())

@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, NoisyGraphs, snapshot_graphs
@@ -165,6 +166,12 @@ def test_imaging_model_end_to_end_needs_the_noise_level(tiny_files, tmp_path):
         )
     train_folds(cfg, tmp_path / "run")
     model = load_model(tmp_path / "run")
+    # the Lightning checkpoint beside the bundle holds the same model
+    from rheograph.learn.module import SurrogateModule
+
+    checkpoint = SurrogateModule.load_from_checkpoint(tmp_path / "run" / "fold0.ckpt", map_location="cpu")
+    bundle = model.models[0][0].state_dict()
+    assert all(torch.equal(v, checkpoint.state_dict()[k]) for k, v in bundle.items())
     snaps = read_snapshots(tiny_files[2])
     values = dict(
         positions=snaps.positions[-2:], radii=snaps.radii, box=[snaps.lx, snaps.ly],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
@@ -25,6 +26,7 @@ from rheograph.graphs.features import (
     SHELL_WIDTHS,
     forward_transform,
     node_features,
+    relax_positions,
     shell_inputs,
     snapshot_descriptors,
     snapshot_edges,
@@ -68,6 +70,14 @@ class GraphSettings:
     # from its positions plus fresh Gaussian noise of eps per coordinate, eps log-uniform in the range
     # (validation and test graphs: one fixed draw each); empty: exact positions (NoisyGraphs)
     noise_range: tuple = ()
+    # > 0: instead of new noise every epoch, this many noisy copies of every snapshot (eps log-uniform in
+    # noise_range, seeded) built once into the cache — for inputs too costly to recompute each epoch
+    # (the one-solve, relax_strain)
+    noise_copies: int = 0
+    # > 0: every snapshot's positions are first sheared by this strain under the simulator's dynamics at
+    # its imposed stress (rheograph.graphs.features.relax_positions: repairs the overlaps that imprecise
+    # positions make), in training and in prediction alike
+    relax_strain: float = 0.0
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -118,17 +128,29 @@ class GraphSettings:
                     f"graph.noise_range={list(self.noise_range)} is invalid: allowed [eps_min, eps_max] "
                     "with 0 < eps_min <= eps_max <= 1 (units of a)"
                 )
-            if "solve_viscosity" in self.graph_inputs:
+            if (
+                "solve_viscosity" in self.graph_inputs or self.relax_strain
+            ) and not self.noise_copies:
                 raise InputError(
                     "graph.noise_range rebuilds every training graph from re-noised positions each epoch; "
-                    "the one-solve input would cost a resistance solve per graph and epoch: drop "
-                    "solve_viscosity from graph.graph_inputs"
+                    "the one-solve input and relax_strain would cost a resistance solve or a stretch of "
+                    "simulation per graph and epoch: set graph.noise_copies (noisy copies built once) or "
+                    "drop solve_viscosity from graph.graph_inputs"
                 )
             if set(self.edge_features) & set(HISTORY_EDGE_FEATURES):
                 raise InputError(
                     "graph.noise_range: re-noised positions have no contact history; drop "
                     f"{sorted(set(self.edge_features) & set(HISTORY_EDGE_FEATURES))} from graph.edge_features"
                 )
+        if self.noise_copies < 0 or (self.noise_copies and not self.noise_range):
+            raise InputError(
+                f"graph.noise_copies={self.noise_copies} is invalid: allowed 0, or >= 1 with "
+                "graph.noise_range set"
+            )
+        if not (math.isfinite(self.relax_strain) and 0.0 <= self.relax_strain <= 0.2):
+            raise InputError(
+                f"graph.relax_strain={self.relax_strain} is invalid: allowed 0 <= relax_strain <= 0.2"
+            )
         if set(self.graph_inputs) & set(SHELL_INPUTS) and self.cutoff < max(SHELL_WIDTHS):
             raise InputError(
                 f"graph.cutoff={self.cutoff} is below the widest gap shell of the shell inputs "
@@ -207,15 +229,28 @@ def snapshot_graphs(
     lx, ly, radii = snaps.lx, snaps.ly, snaps.radii
     check_edge_reach(lx, ly, radii, settings.cutoff, path)
     solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
-    conditions = {"phi": snaps.phi, "position_noise": snaps.position_noise or 0.0}
+    # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
+    noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
+    positions, offsets = snaps.positions, snaps.le_offset
+    if settings.relax_strain:
+        if "disp_max" not in solve_params:
+            raise InputError(
+                f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "
+                "needs the step disp_max: add disp_max to the file"
+            )
+        positions, offsets = positions.copy(), offsets.copy()
+        for idx in keep:
+            positions[idx], offsets[idx] = relax_positions(
+                positions[idx], radii, lx, ly, offsets[idx], solve_params, settings.relax_strain
+            )
     return [
         snapshot_graph(
-            snaps.positions[idx],
+            positions[idx],
             radii,
-            (lx, ly, snaps.le_offset[idx]),
+            (lx, ly, offsets[idx]),
             solve_params,
             settings,
-            conditions,
+            {"phi": snaps.phi, "position_noise": float(noise[idx])},
             contacts=contacts[k],
             targets=snaps.targets[idx],
             jammed=bool(snaps.jammed[idx]),
@@ -284,6 +319,20 @@ def snapshot_graph(
         strain=torch.tensor([strain], dtype=torch.float64),
         run_id=torch.tensor([run_id]),
     )
+
+
+def noisy_copy(snaps: Snapshots, noise_range, seed) -> Snapshots:
+    """``snaps`` with Gaussian noise on every snapshot's positions, eps log-uniform in ``noise_range``
+    drawn per snapshot (``position_noise`` then holds the (S,) draws); ``seed`` seeds the draws."""
+    rng = np.random.default_rng(seed)
+    eps = np.exp(rng.uniform(*np.log(np.asarray(noise_range, dtype=np.float64)), len(snaps)))
+    positions = np.stack(
+        [
+            wrap_into_box(p + rng.normal(0.0, e, p.shape), snaps.lx, snaps.ly, o)
+            for p, e, o in zip(snaps.positions, eps, snaps.le_offset)
+        ]
+    )
+    return dataclasses.replace(snaps, positions=positions, contacts=None, position_noise=eps)
 
 
 class NoisyGraphs(torch.utils.data.Dataset):
@@ -377,7 +426,7 @@ class SnapshotGraphDataset(InMemoryDataset):
                         "viscosity_on_solve",
                         "pressure_on_spring",
                         # the cache holds the exact graphs; the noise is drawn when they are read
-                        "noise_range",
+                        *(() if settings.noise_copies else ("noise_range",)),
                     )
                 },
                 "files": _files_fingerprint(self.files),
@@ -415,7 +464,14 @@ class SnapshotGraphDataset(InMemoryDataset):
     def process(self):
         graphs = []
         for run_id, path in enumerate(self.files):
-            graphs.extend(snapshot_graphs(read_snapshots(path, self.lfdem_params), self.settings, run_id))
+            snaps = read_snapshots(path, self.lfdem_params)
+            if not self.settings.noise_copies:
+                graphs.extend(snapshot_graphs(snaps, self.settings, run_id))
+                continue
+            log.info("noisy copies of %s (%d/%d)", path, run_id + 1, len(self.files))
+            for copy_id in range(self.settings.noise_copies):
+                noisy = noisy_copy(snaps, self.settings.noise_range, [run_id, copy_id])
+                graphs.extend(snapshot_graphs(noisy, self.settings, run_id))
         if not graphs:
             raise InputError(f"no snapshots with strain >= {self.settings.min_strain} in {self.files}")
         self.save(graphs, self.processed_paths[0])

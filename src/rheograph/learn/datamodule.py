@@ -227,7 +227,7 @@ class SnapshotDataModule(L.LightningDataModule):
         """The graphs at ``idx`` as the model sees them: with ``graph.noise_range``, rebuilt from
         re-noised positions (``fresh``: new noise at every access, else one fixed draw per graph)."""
         subset = self.dataset[torch.as_tensor(idx)]
-        if not self.graph.noise_range:
+        if not self.graph.noise_range or self.graph.noise_copies:  # exact, or noisy copies in the cache
             return subset
         if self.run_params is None:
             self.run_params = {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 
 import lightning as L
@@ -12,6 +13,8 @@ from torch import nn
 from rheograph.errors import InputError
 from rheograph.graphs.features import inverse_transform
 from rheograph.learn.model import ResGCN
+
+log = logging.getLogger("rheograph")
 
 TARGET_NAMES = ("eta", "pressure", "z_mu")
 LR_SCHEDULES = ("constant", "cosine")
@@ -151,8 +154,10 @@ def state_mean(table: torch.Tensor, phi: torch.Tensor, log_stress: torch.Tensor)
     """The (G, 3) state-mean of ``state_table`` at each graph's (phi, log sigma): the trained area
     fraction nearest to phi, linear in log sigma between its trained stresses (held constant beyond
     them), per target over the state points where it is known."""
-    out = torch.empty((phi.shape[0], 3), dtype=torch.float64)
     rows = table[torch.isfinite(table[:, 0])]
+    if not rows.shape[0]:  # not fitted yet: zero, like target_mean before fit_target_scaling
+        return torch.zeros((phi.shape[0], 3), dtype=torch.float64)
+    out = torch.empty((phi.shape[0], 3), dtype=torch.float64)
     trained_phi = torch.unique(rows[:, 0])
     nearest = trained_phi[torch.argmin((phi.double().view(-1, 1) - trained_phi.view(1, -1)).abs(), dim=1)]
     for value in torch.unique(nearest):
@@ -208,6 +213,37 @@ class FoldResumePoint(L.pytorch.callbacks.ModelCheckpoint):
         super().on_train_start(trainer, pl_module)
         if self._stopped:  # killed after training had ended (testing, saving): train no further epoch
             trainer.should_stop = True
+
+
+class EpochLog(L.pytorch.callbacks.Callback):
+    """One log line every ``every_n_epochs`` epochs (fold, epoch, train and validation loss, elapsed
+    time): training progress that stays readable when folds train in parallel processes, where a
+    progress bar per process would interleave."""
+
+    def __init__(self, every_n_epochs: int = 10):
+        if every_n_epochs < 1:
+            raise InputError(f"callbacks.epoch_log.every_n_epochs={every_n_epochs}: allowed >= 1")
+        self.every_n_epochs = every_n_epochs
+        self.label = "training"  # train_fold names the fold
+        self._start = None
+
+    def on_train_start(self, trainer, pl_module) -> None:
+        import time
+
+        self._start = time.monotonic()
+
+    def on_validation_epoch_end(self, trainer, pl_module) -> None:
+        import time
+
+        epoch = trainer.current_epoch + 1
+        if trainer.sanity_checking or (epoch % self.every_n_epochs and epoch != trainer.max_epochs):
+            return
+        metrics = trainer.callback_metrics
+        losses = ", ".join(
+            f"{key} {float(metrics[key]):.4g}" for key in ("train/loss", "val/loss") if key in metrics
+        )
+        elapsed = time.monotonic() - (self._start or time.monotonic())
+        log.info("%s: epoch %d/%d, %s (%.0f s)", self.label, epoch, trainer.max_epochs, losses, elapsed)
 
 
 class SurrogateModule(L.LightningModule):

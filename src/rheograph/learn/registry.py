@@ -191,6 +191,24 @@ def card_markdown(card: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_lightning_checkpoint(bundle: dict, path: Path) -> None:
+    """The weights and hyperparameters of a fold bundle as a Lightning checkpoint at ``path``:
+    ``SurrogateModule.load_from_checkpoint(path)`` rebuilds the module (the graph settings and the
+    trained domain stay in the bundle)."""
+    import lightning as L
+
+    buffer = io.BytesIO()
+    torch.save(
+        {
+            "state_dict": bundle["state_dict"],
+            "hyper_parameters": bundle["hparams"],
+            "pytorch-lightning_version": L.__version__,
+        },
+        buffer,
+    )
+    path.write_bytes(buffer.getvalue())
+
+
 def ship(run_dir: str | Path, name: str) -> Path:
     run_dir = Path(run_dir)
     bundles = sorted(run_dir.glob("fold*.pt"))
@@ -205,6 +223,7 @@ def ship(run_dir: str | Path, name: str) -> Path:
         buffer = io.BytesIO()
         torch.save(bundle, buffer)
         (directory / path.name).write_bytes(buffer.getvalue())
+        write_lightning_checkpoint(bundle, directory / f"{path.stem}.ckpt")
         first = first or bundle
     if (run_dir / "error_model.json").is_file():
         shutil.copy(run_dir / "error_model.json", directory / "error_model.json")

@@ -22,7 +22,7 @@ from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
-from rheograph.learn.module import TARGET_NAMES, FoldResumePoint, fold_metrics, physical_targets
+from rheograph.learn.module import TARGET_NAMES, EpochLog, FoldResumePoint, fold_metrics, physical_targets
 from rheograph.naming import state_point_key
 
 log = logging.getLogger("rheograph.train")
@@ -166,6 +166,8 @@ def train_fold(
     resume_point = resume_dir / "last.ckpt"
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] + list(extra_callbacks)
     for callback in callbacks:
+        if isinstance(callback, EpochLog):
+            callback.label = f"fold {k}"
         # the best-so-far weights are scratch of an unfinished fold (fold<k>.pt keeps them once it
         # finishes): beside the resume point and removed with it, not left in the run or TensorBoard folder
         if isinstance(callback, ModelCheckpoint) and callback.dirpath is None:
@@ -194,6 +196,8 @@ def train_fold(
     )
     if not np.isfinite(best_val):
         raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
+    # the same weights as a Lightning checkpoint: SurrogateModule.load_from_checkpoint(fold<k>.ckpt)
+    trainer.save_checkpoint(run_dir / f"fold{k}.ckpt", weights_only=True)
     test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
     pred, true, meta = predict_dataset(module, dm.graphs(dm.test_idx))
     fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
