@@ -61,6 +61,8 @@ def test_file_layout_and_snapshot_targets(tmp_path):
             assert sn["z_mu"][k] == pytest.approx(2 * np.sum(states >= 2) / 64)
     info = read_run_info(path)
     assert np.isfinite(info["summary"]["viscosity"])
+    # the cost record of the scaling tables
+    assert info["summary"]["steps"] > 0 and 50 < info["summary"]["peak_memory_mb"] < 24e3
 
 
 def test_damage_found_after_the_file_opens_falls_back_to_the_last_checkpoint_copy(
@@ -258,6 +260,7 @@ def test_a_run_respaced_and_extended_equals_a_run_at_the_coarser_spacing_from_th
         counters = [json.loads(h5["checkpoint"].attrs["counters"]) for h5 in (a, b)]
         for c in counters:
             c.pop("cpu_seconds")  # measured, not simulated
+            c.pop("peak_memory_mb")
         assert counters[0] == counters[1]
     # a batch is checked whole before any file is rewritten: a jammed run in it leaves the others alone
     jammed, other = tmp_path / "jammed.h5", tmp_path / "other.h5"

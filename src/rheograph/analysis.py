@@ -55,7 +55,7 @@ def steady_state_summary(
 
 
 def read_lfdem_data(path) -> dict:
-    """Columns of an LF_DEM ``data_*.dat`` time series (see shared/reference/README.md)."""
+    """Columns of an LF_DEM ``data_*.dat`` time series (see data/lfdem_reference/README.md)."""
     table = np.loadtxt(path, comments="#")
     return {
         "time": table[:, 0],

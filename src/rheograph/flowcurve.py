@@ -1,7 +1,7 @@
 """Flow curves (eta_r, Pi, Z_mu vs sigma) from a directory of trajectory files, optionally against
 LF_DEM reference data.
 
-    python -m rheograph.flowcurve data/flow_curves --out docs --reference ../shared/reference/lfdem_phi0.76
+    python -m rheograph.flowcurve data/flow_curves --out docs --reference data/lfdem_reference/lfdem_phi0.76
 
 writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled: the
 value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the propagated

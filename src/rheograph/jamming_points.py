@@ -112,21 +112,27 @@ def wyart_cates(f, phi_0, phi_mu):
     return f * phi_mu + (1.0 - f) * phi_0
 
 
-def fit_wyart_cates(phi, f, eta) -> dict:
-    """Least squares in log eta_r of eta_r = A (1 - phi / phi_m(f))^(-2), phi_m of ``wyart_cates``."""
+def fit_wyart_cates(phi, f, eta, beta: float | None = 2.0) -> dict:
+    """Least squares in log eta_r of eta_r = A (1 - phi / phi_m(f))^(-beta), phi_m of ``wyart_cates``
+    (beta fitted when None)."""
     phi, f, log_eta = (np.asarray(v, float) for v in (phi, f, eta))
     log_eta = np.log(log_eta)
 
     def residual(x):
         phi_m = wyart_cates(f, x[0], x[1])
         gap = np.maximum(1.0 - phi / phi_m, 1e-9)
-        return log_eta - (x[2] - 2.0 * np.log(gap))
+        b = beta if beta is not None else x[3]
+        return log_eta - (x[2] + -b * np.log(gap))
 
-    fit = least_squares(residual, [0.84, 0.80, 0.0], bounds=([0.5, 0.5, -np.inf], [1.0, 1.0, np.inf]))
+    x0 = [0.84, 0.80, 0.0] + ([2.0] if beta is None else [])
+    lower = [0.5, 0.5, -np.inf] + ([0.1] if beta is None else [])
+    upper = [1.0, 1.0, np.inf] + ([10.0] if beta is None else [])
+    fit = least_squares(residual, x0, bounds=(lower, upper))
     return {
         "phi_j0": float(fit.x[0]),
         "phi_jmu": float(fit.x[1]),
         "prefactor": float(np.exp(fit.x[2])),
+        "beta": float(beta if beta is not None else fit.x[3]),
         "rms_log": float(np.sqrt(np.mean(fit.fun**2))),
     }
 
@@ -205,33 +211,38 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                 )
         everything = [r for r in runs if r["n"] == n and flowing(r) and np.isfinite(r["z_mu"]) and r["z"] > 0]
         if len({r["phi"] for r in everything}) >= 3 and any(r["z_mu"] > 0 for r in everything):
+            for beta in (2.0, None):
 
-            def wc(sample):
-                return fit_wyart_cates(
-                    [r["phi"] for r in sample],
-                    [r["z_mu"] / r["z"] for r in sample],
-                    [r["eta"] for r in sample],
-                )
+                def wc(sample, b=beta):
+                    return fit_wyart_cates(
+                        [r["phi"] for r in sample],
+                        [r["z_mu"] / r["z"] for r in sample],
+                        [r["eta"] for r in sample],
+                        b,
+                    )
 
-            fit = wc(everything)
-            spread = bootstrap(everything, wc, ["phi_j0", "phi_jmu"], rng)
-            for name, key in (("phi_J^0", "phi_j0"), ("phi_J^mu", "phi_jmu")):
-                rows.append(
-                    {
-                        "n": n,
-                        "quantity": name,
-                        "method": "Wyart–Cates, f = Z_mu / Z",
-                        "data": "every flowing state point",
-                        "trajectories": len(everything),
-                        "phi_range": (min(r["phi"] for r in everything), max(r["phi"] for r in everything)),
-                        "phi_j": fit[key],
-                        "phi_j_ci": spread[key][1:],
-                        "beta": 2.0,
-                        "beta_ci": None,
-                        "rms_log": fit["rms_log"],
-                        "wyart_cates": fit,
-                    }
-                )
+                fit = wc(everything)
+                spread = bootstrap(everything, wc, ["phi_j0", "phi_jmu", "beta"], rng)
+                for name, key in (("phi_J^0", "phi_j0"), ("phi_J^mu", "phi_jmu")):
+                    rows.append(
+                        {
+                            "n": n,
+                            "quantity": name,
+                            "method": "Wyart–Cates, f = Z_mu / Z, " + ("beta = 2" if beta else "beta fitted"),
+                            "data": "every flowing state point",
+                            "trajectories": len(everything),
+                            "phi_range": (
+                                min(r["phi"] for r in everything),
+                                max(r["phi"] for r in everything),
+                            ),
+                            "phi_j": fit[key],
+                            "phi_j_ci": spread[key][1:],
+                            "beta": fit["beta"],
+                            "beta_ci": spread["beta"][1:] if beta is None else None,
+                            "rms_log": fit["rms_log"],
+                            "wyart_cates": fit,
+                        }
+                    )
     return rows
 
 
@@ -252,6 +263,19 @@ def markdown(rows: list[dict], command: str) -> str:
         )
     lines += ["", f"Command: `{command}`"]
     return "\n".join(lines)
+
+
+def replace_section(path: Path, name: str, body: str) -> None:
+    """Put ``body`` between ``<!-- name:start -->`` and ``<!-- name:end -->`` of ``path`` (appended, with
+    the markers, where they are absent)."""
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    text = path.read_text() if path.exists() else ""
+    block = f"{start}\n{body}\n{end}"
+    if start in text and end in text:
+        text = text[: text.index(start)] + block + text[text.index(end) + len(end) :]
+    else:
+        text = text.rstrip() + ("\n\n" if text else "") + block + "\n"
+    path.write_text(text)
 
 
 def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
@@ -304,7 +328,9 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("indexes", nargs="+", help="run indexes (python -m rheograph.collect)")
-    ap.add_argument("--out", help="markdown table (default: print)")
+    ap.add_argument(
+        "--out", help="markdown file whose <!-- jamming_fits:start/end --> section gets the table"
+    )
     ap.add_argument("--figure", help="phase-diagram PNG")
     ap.add_argument("--seed", type=int, default=0, help="bootstrap seed")
     ap.add_argument(
@@ -319,10 +345,9 @@ def main(argv=None) -> None:
         raise InputError(f"{args.indexes}: no branch with three area fractions of flowing runs to fit")
     command = "python -m rheograph.jamming_points " + " ".join(argv if argv is not None else sys.argv[1:])
     text = markdown(rows, command)
+    print(text)
     if args.out:
-        Path(args.out).write_text(text + "\n")
-    else:
-        print(text)
+        replace_section(Path(args.out), "jamming_fits", text)
     if args.figure:
         plot_phase_diagram(runs, rows, Path(args.figure))
 

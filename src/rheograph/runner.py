@@ -159,6 +159,9 @@ def run_state_point(
                 loop.save()
             summary = _summary(traj, params, status, sim.state.strain)
             summary["cpu_seconds"] = loop.cpu_seconds()
+            # the run's cost in the units the scaling tables use: steps and the largest resident set
+            summary["steps"] = int(sim.state.steps)
+            summary["peak_memory_mb"] = loop.peak_memory_mb()
             traj.finish(status, summary)  # partial runs get a summary too; their status says so
     except OSError as exc:
         if not hdf5_write_found_no_room(exc):
@@ -199,6 +202,7 @@ class _RunLoop:
         # work after its last checkpoint is redone and counted once, as it is recomputed)
         self.cpu_before = float(counters.get("cpu_seconds", 0.0))
         self.cpu_start = wallclock.process_time()
+        self.peak_before = float(counters.get("peak_memory_mb", 0.0))
         self.bar = tqdm(
             total=params.strain,
             initial=round(sim.state.strain, 4),
@@ -218,8 +222,16 @@ class _RunLoop:
                 last_row_strain=self.last_row_strain,
                 jam_window=self.jam_window,
                 cpu_seconds=self.cpu_seconds(),
+                peak_memory_mb=self.peak_memory_mb(),
             ),
         )
+
+    def peak_memory_mb(self) -> float:
+        """Largest resident set of the process [MB] over all invocations of the run (Linux: ru_maxrss
+        in kB; it includes what the process held before the run, e.g. an earlier run of a sweep)."""
+        import resource
+
+        return max(self.peak_before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 
     def cpu_seconds(self) -> float:
         return self.cpu_before + wallclock.process_time() - self.cpu_start
