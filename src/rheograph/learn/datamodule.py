@@ -11,6 +11,7 @@ standardisation are fitted on the training part only.
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import json
 from pathlib import Path
@@ -181,9 +182,21 @@ class SnapshotDataModule(L.LightningDataModule):
             self.train_idx = thin_snapshots(self.train_idx, runs, self.train_fraction)
         # edge-feature standardisation, fitted on the training graphs only (binary and constant
         # features get std 1 where they do not vary)
-        edges = torch.cat([dataset[int(i)].edge_attr for i in self.train_idx]).double()
+        train_graphs = self.graphs(self.train_idx)  # as the model sees them (re-noised where trained so)
+        edges = torch.cat([train_graphs[k].edge_attr for k in range(len(train_graphs))]).double()
         self.edge_mean = edges.mean(dim=0).float()
         self.edge_std = edges.std(dim=0).clamp_min(1e-6).float()
+        extremes = edges
+        if self.graph.noise_range and not self.graph.noise_copies:
+            # the trained range of the features reaches what the largest trained noise makes
+            loudest = NoisyGraphs(
+                dataset[torch.as_tensor(self.train_idx)],
+                dataclasses.replace(self.graph, noise_range=(self.graph.noise_range[1],) * 2),
+                self.run_params,
+                fresh=False,
+                seed=self.split_seed + 1,
+            )
+            extremes = torch.cat([edges, *(loudest[k].edge_attr.double() for k in range(len(loudest)))])
         train = torch.as_tensor(self.train_idx)
         self.domain = {  # what the model has seen: predict.py flags inputs outside it
             "phi": [float(dataset.phi[train].min()), float(dataset.phi[train].max())],
@@ -192,8 +205,8 @@ class SnapshotDataModule(L.LightningDataModule):
             "size_ratio": sorted(
                 {round(trajectory_param(f, "size_ratio", self.lfdem_params), 6) for f in self.files}
             ),
-            "edge_min": edges.min(dim=0).values.tolist(),
-            "edge_max": edges.max(dim=0).values.tolist(),
+            "edge_min": extremes.min(dim=0).values.tolist(),
+            "edge_max": extremes.max(dim=0).values.tolist(),
             # which trained state points jammed (rheograph.learn.jamming): the surrogate's jam rule
             "jam_map": fit_jam_map(
                 dataset.phi[train].numpy(),

@@ -86,25 +86,46 @@ def trained_noise(domain: dict) -> tuple[float, float]:
     return (float(noise[0]), float(noise[1])) if isinstance(noise, list | tuple) else (0.0, float(noise))
 
 
-def noise_reason(domain: dict, noise: float) -> str:
+def models_for_noise(phi: float, n_particles: int, noise: float) -> list[str]:
+    """Shipped models whose trained domain covers (phi, N) and positions of precision ``noise`` [a]."""
+    names = []
+    for name in list_models():
+        card = read_card(model_paths(name)[0])
+        if not card:
+            continue
+        low, high = trained_noise({"position_noise": card["position_noise"]})
+        d = card["domain"]
+        covers = d["phi"][0] - 1e-3 <= phi <= d["phi"][1] + 1e-3 and n_particles in d["n_particles"]
+        exact_enough = noise <= EXACT_POSITION_PRECISION if high == 0.0 else noise <= high
+        if covers and exact_enough and not (high and noise < low and noise <= EXACT_POSITION_PRECISION):
+            names.append(name)
+    return names
+
+
+def noise_reason(domain: dict, noise: float, alternatives=()) -> str:
     """Why positions of RMS precision ``noise`` [a] are outside a model's domain ('' if they are not).
     An exact model reads overlaps of ~1e-3 a: precision worse than EXACT_POSITION_PRECISION is outside;
     an imaging model is outside above its trained eps_max (below its eps_min it is used on cleaner
     positions than it saw, which the exact model serves better)."""
     low, high = trained_noise(domain)
+    instead = (
+        f": use {' or '.join(alternatives)}" if alternatives else " (predict.py --list-models: the domains)"
+    )
     if high == 0.0:
         if noise > EXACT_POSITION_PRECISION:
             return (
                 f"positions known to {noise:.2g} a, the model was trained on exact positions (it reads "
-                "overlaps of ~1e-3 a): use an imaging model (predict.py --list-models)"
+                f"overlaps of ~1e-3 a){instead if alternatives else ': use an imaging model' + instead}"
             )
         return ""
     if noise > high:
-        return f"positions known to {noise:.2g} a, beyond the {high:g} a of the model's noisy training"
+        return (
+            f"positions known to {noise:.2g} a, beyond the {high:g} a of the model's noisy training{instead}"
+        )
     if noise < low and noise <= EXACT_POSITION_PRECISION:
         return (
-            f"positions known to {noise:.2g} a, below the {low:g} a of the model's noisy training: the "
-            "exact model of this suspension is more accurate on them"
+            f"positions known to {noise:.2g} a, below the {low:g} a of the model's noisy training: an "
+            f"exact model of this suspension is more accurate on them{instead}"
         )
     return ""
 
@@ -120,8 +141,10 @@ def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tupl
             reasons.append(f"{key} = {value:g} outside the trained [{low:g}, {high:g}]")
     if snaps.n_particles not in domain["n_particles"]:
         reasons.append(f"N = {snaps.n_particles} not among the trained N {domain['n_particles']}")
-    reason = noise_reason(domain, snaps.position_noise or 0.0)
+    noise = snaps.position_noise or 0.0
+    reason = noise_reason(domain, noise)
     if reason:
+        reason = noise_reason(domain, noise, models_for_noise(snaps.phi, snaps.n_particles, noise))
         reasons.append(reason)
     flags = np.full(len(graphs), not reasons)
     low, high = np.array(domain["edge_min"]), np.array(domain["edge_max"])

@@ -1,0 +1,92 @@
+"""Jamming-point fits: closed forms recovered, branches selected as documented, noise bracketed."""
+
+import json
+
+import numpy as np
+import pytest
+
+from rheograph.errors import InputError
+from rheograph.jamming_points import (
+    bootstrap,
+    fit_divergence,
+    fit_wyart_cates,
+    frictionless_branch,
+    jamming_table,
+    main,
+    near,
+    plateau_branch,
+)
+
+
+def test_divergence_fit_recovers_phi_j_and_beta_of_an_exact_power_law():
+    phi = np.array([0.78, 0.80, 0.81, 0.82, 0.83])
+    eta = 0.7 * (0.845 - phi) ** -1.6
+    free = fit_divergence(phi, eta)
+    assert free["phi_j"] == pytest.approx(0.845, abs=1e-6) and free["beta"] == pytest.approx(1.6, abs=1e-5)
+    assert free["prefactor"] == pytest.approx(0.7, rel=1e-4) and free["rms_log"] < 1e-8
+    fixed = fit_divergence(phi, 0.7 * (0.845 - phi) ** -2.0, beta=2.0)
+    assert fixed["phi_j"] == pytest.approx(0.845, abs=1e-6) and fixed["beta"] == 2.0
+    with pytest.raises(InputError, match="at least 3 area fractions"):
+        fit_divergence([0.78, 0.78, 0.80], [70, 71, 120])
+
+
+def test_wyart_cates_fit_recovers_both_jamming_points_from_mixed_friction():
+    rng = np.random.default_rng(0)
+    phi = rng.uniform(0.70, 0.79, 60)
+    f = rng.uniform(0.0, 1.0, 60)
+    phi_m = f * 0.80 + (1 - f) * 0.85
+    eta = 1.3 * (1 - phi / phi_m) ** -2.0
+    fit = fit_wyart_cates(phi, f, eta)
+    assert fit["phi_j0"] == pytest.approx(0.85, abs=1e-6) and fit["phi_jmu"] == pytest.approx(0.80, abs=1e-6)
+    free = fit_wyart_cates(phi, f, 1.3 * (1 - phi / phi_m) ** -1.7, beta=None)
+    assert free["beta"] == pytest.approx(1.7, abs=1e-5) and free["phi_j0"] == pytest.approx(0.85, abs=1e-6)
+
+
+def _run(n, phi, stress, seed, eta, mu=0.5, z_mu=0.0, z=2.0, status="completed"):
+    return dict(n=n, phi=phi, stress=stress, seed=seed, mu=mu, status=status, eta=eta, z_mu=z_mu, z=z)
+
+
+def test_branches_select_frictionless_and_plateau_runs_and_skip_jammed_ones():
+    runs = [
+        _run(400, 0.80, 1.0, 1, 120.0, mu=0.0),  # mu = 0: frictionless at any stress
+        _run(400, 0.76, 0.5, 1, 46.0, z_mu=0.0),  # frictional set at low stress, no frictional contact
+        _run(400, 0.76, 0.5, 2, 47.0, z_mu=0.05),  # some friction: not on the branch
+        _run(400, 0.76, 2.0, 1, 60.0, z_mu=0.4),
+        _run(400, 0.76, 200.0, 1, 230.0, z_mu=2.3),
+        _run(400, 0.80, 200.0, 1, np.inf, z_mu=2.7, status="jammed"),
+        _run(2000, 0.76, 200.0, 1, 232.0, z_mu=2.3),
+    ]
+    assert {(r["phi"], r["stress"]) for r in frictionless_branch(runs, 400)} == {(0.80, 1.0), (0.76, 0.5)}
+    plateau, top = plateau_branch(runs, 400)
+    assert top == 200.0 and [r["phi"] for r in plateau] == [0.76]  # the jammed run has no viscosity
+    assert [r["phi"] for r in near(frictionless_branch(runs, 400), 0.03)] == [0.80]
+
+
+def test_bootstrap_interval_brackets_the_true_jamming_point_of_noisy_seeds():
+    rng = np.random.default_rng(1)
+    runs = [
+        _run(400, phi, 1.0, seed, 0.7 * (0.845 - phi) ** -2.0 * np.exp(rng.normal(0, 0.05)), mu=0.0)
+        for phi in (0.79, 0.80, 0.81, 0.82, 0.83)
+        for seed in (1, 2, 3)
+    ]
+    spread = bootstrap(
+        runs, lambda s: fit_divergence([r["phi"] for r in s], [r["eta"] for r in s], 2.0), ["phi_j"], rng, 200
+    )
+    median, low, high = spread["phi_j"]
+    # a 68 % interval: the truth within three of its half-widths, and the interval a few 1e-3 wide
+    # (5 % noise on 15 trajectories)
+    assert abs(median - 0.845) < 1.5 * (high - low) and 0 < high - low < 0.01
+    rows = jamming_table(runs, seed=0)
+    assert {r["method"] for r in rows} == {"divergence, beta = 2", "divergence, beta fitted"}
+
+
+def test_command_line_names_a_bad_index(tmp_path, capsys):
+    bad = tmp_path / "index.json"
+    bad.write_text("not json")
+    with pytest.raises(InputError, match="not a readable run index"):
+        main([str(bad)])
+    bad.write_text(json.dumps({"runs": []}))
+    with pytest.raises(InputError, match="no branch with three area fractions"):
+        main([str(bad)])
+    with pytest.raises(InputError, match="--window"):
+        main([str(bad), "--window", "0"])
