@@ -245,3 +245,48 @@ def test_a_model_on_the_state_mean_predicts_the_lookup_when_its_network_says_not
         per_stress = torch.asinh(torch.sinh(y[:, 1]) / stress)
         expected = torch.asinh(torch.sinh(per_stress.mean()) * stress)
         assert torch.allclose(pred[at, 1], expected.expand(int(at.sum())), atol=1e-5)
+
+
+def test_positions_only_model_predicts_without_the_stress(tiny_files, tmp_path):
+    """graph=imaging_positions: trained through train.py, it predicts eta_r, Z_mu and mu_eff = sigma/Pi
+    from positions alone; Pi in sigma0 only where the snapshot states sigma.  Exact models refuse a
+    snapshot without a stress by name."""
+    from hydra import compose, initialize_config_dir
+
+    from conftest import ROOT, tiny_training_overrides
+    from rheograph.learn.predict import load_model
+    from rheograph.learn.train import train_folds
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(
+            "train",
+            overrides=[
+                "experiment=imaging",
+                "graph=imaging_positions",
+                *tiny_training_overrides(tiny_files, tmp_path),
+                "data.split=random",
+                "trainer.max_epochs=2",
+                "trainer.enable_progress_bar=false",
+                "~logger",
+                "report=false",
+                "fold=0",
+            ],
+        )
+    train_folds(cfg, tmp_path / "run")
+    model = load_model(tmp_path / "run")
+    snaps = read_snapshots(tiny_files[2])
+    values = dict(
+        positions=snaps.positions[-2:], radii=snaps.radii, box=[snaps.lx, snaps.ly],
+        le_offset=snaps.le_offset[-2:], phi=snaps.phi, position_noise=0.01,
+        mu=0.5, kn_coefficient=2e4, kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5,
+    )  # fmt: skip
+    blind = model.predict(stress=None, **values)
+    assert np.isfinite(blind["eta_pred"]).all() and np.isfinite(blind["z_mu_pred"]).all()
+    assert np.isnan(blind["pressure_pred"]).all() and (blind["mu_eff_pred"] > 0).all()
+    told = model.predict(stress=snaps.stress, **values)
+    # the stress changes nothing the model reads; it only converts Pi / sigma to sigma0
+    assert np.allclose(told["eta_pred"], blind["eta_pred"])
+    assert np.allclose(told["pressure_pred"], snaps.stress * blind["pressure_per_stress_pred"])
+    exact = load_model("N400_phi0.76")
+    with pytest.raises(InputError, match="imposed stress"):
+        exact.predict(stress=None, **{**values, "position_noise": None})

@@ -24,6 +24,7 @@ from rheograph.graphs.features import (
     PAPER_EDGE_FEATURES,
     SHELL_INPUTS,
     SHELL_WIDTHS,
+    STRESS_EDGE_FEATURES,
     forward_transform,
     node_features,
     relax_positions,
@@ -78,6 +79,10 @@ class GraphSettings:
     # its imposed stress (rheograph.graphs.features.relax_positions: repairs the overlaps that imprecise
     # positions make), in training and in prediction alike
     relax_strain: float = 0.0
+    # false: a positions-only model, for snapshots whose imposed stress is unknown: no input may use it,
+    # and Pi is learned per stress (Pi / sigma = 1 / mu_eff, what positions determine when k_n is
+    # proportional to sigma; Pi in sigma0 is not identifiable from positions)
+    stress_known: bool = True
 
     def __post_init__(self):
         if not 0.0 < self.cutoff <= 5.0:
@@ -128,9 +133,7 @@ class GraphSettings:
                     f"graph.noise_range={list(self.noise_range)} is invalid: allowed [eps_min, eps_max] "
                     "with 0 < eps_min <= eps_max <= 1 (units of a)"
                 )
-            if (
-                "solve_viscosity" in self.graph_inputs or self.relax_strain
-            ) and not self.noise_copies:
+            if ("solve_viscosity" in self.graph_inputs or self.relax_strain) and not self.noise_copies:
                 raise InputError(
                     "graph.noise_range rebuilds every training graph from re-noised positions each epoch; "
                     "the one-solve input and relax_strain would cost a resistance solve or a stretch of "
@@ -156,7 +159,25 @@ class GraphSettings:
                 f"graph.cutoff={self.cutoff} is below the widest gap shell of the shell inputs "
                 f"({max(SHELL_WIDTHS)} a): raise it or drop the shell_* graph inputs"
             )
-        if self.pressure_per_stress and "log_stress" not in self.graph_inputs:
+        if not self.stress_known:
+            uses = [
+                x
+                for x in self.graph_inputs
+                if x in ("log_stress", "solve_viscosity", "frictional_coordination")
+            ]
+            uses += [x for x in self.edge_features if x in STRESS_EDGE_FEATURES]
+            if uses or self.relax_strain:
+                raise InputError(
+                    "graph.stress_known=false (a positions-only model): "
+                    f"{uses + (['relax_strain'] if self.relax_strain else [])} need the imposed stress; "
+                    "drop them"
+                )
+            if not self.pressure_per_stress:
+                raise InputError(
+                    "graph.stress_known=false needs graph.pressure_per_stress=true: positions determine "
+                    "Pi / sigma, not Pi in sigma0"
+                )
+        if self.pressure_per_stress and "log_stress" not in self.graph_inputs and self.stress_known:
             raise InputError(
                 "graph.pressure_per_stress=true learns Pi in units of the imposed stress, which the model "
                 f"must then be given: add log_stress to graph.graph_inputs (now {list(self.graph_inputs)})"
@@ -203,6 +224,11 @@ def snapshot_graphs(
         raise InputError(
             f"{path}: the one-solve input (solve_viscosity) needs the step disp_max, which this source does "
             "not record: add disp_max to the file"
+        )
+    if settings.stress_known and not np.isfinite(snaps.stress):
+        raise InputError(
+            f"{path}: the imposed stress (key stress, sigma/sigma0) is not given; this model reads it "
+            "(a positions-only model, graph.stress_known=false, does not)"
         )
     if "position_noise" in settings.graph_inputs and snaps.position_noise is None:
         raise InputError(
@@ -281,7 +307,8 @@ def snapshot_graph(
     lx, ly, le_offset = box
     stress = float(params["stress"])
     # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
-    eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if "disp_max" in params else np.nan
+    solvable = "disp_max" in params and np.isfinite(stress)
+    eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if solvable else np.nan
     known = {"log_stress": np.log(stress), **conditions}
     known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
     edge_index, feats, pairs = snapshot_edges(

@@ -269,7 +269,9 @@ def read_bare(path: str | Path) -> Snapshots:
 def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snapshots:
     """``Snapshots`` from the keys of a bare snapshot file (module docstring), checked; ``where`` names
     the source in messages."""
-    required = ("positions", "radii", "box", "le_offset", "stress", "phi", *BARE_REQUIRED_PARAMS)
+    # the stress may be unknown (a positions-only model reads none): NaN then, refused by every model
+    # that needs it (rheograph.graphs.dataset.snapshot_graphs)
+    required = ("positions", "radii", "box", "le_offset", "phi", *BARE_REQUIRED_PARAMS)
     missing = [key for key in required if key not in values]
     if missing:
         raise InputError(
@@ -297,7 +299,8 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         offsets = np.full(n_snap, offsets[0])
     if offsets.size != n_snap or not np.all(np.isfinite(offsets)):
         raise InputError(f"{where}: le_offset must be one number or (S,) = ({n_snap},) finite numbers")
-    stress, phi = _scalar(values, "stress", where), _scalar(values, "phi", where)
+    phi = _scalar(values, "phi", where)
+    stress = _scalar(values, "stress", where) if values.get("stress") is not None else float("nan")
     if stress <= 0:
         raise InputError(f"{where}: stress = {stress:g} must be > 0 (σ/σ0)")
     check_geometry(where, radii, lx, ly, phi)

@@ -300,6 +300,7 @@ class SurrogateModule(L.LightningModule):
         viscosity_input: int = -1,
         pressure_input: int = -1,
         on_state_mean: bool = False,
+        state_mean_by_stress: bool = True,
     ):
         super().__init__()
         self.save_hyperparameters()
@@ -354,12 +355,17 @@ class SurrogateModule(L.LightningModule):
             out[:, target] = out[:, target] - u[:, column].to(out.dtype)
         return out
 
+    def _state_key(self, stress: torch.Tensor) -> torch.Tensor:
+        """log sigma of each graph for the state-mean table; 0 for a positions-only model, whose
+        lookup is the per-phi mean (it is not told sigma)."""
+        if self.hparams.get("state_mean_by_stress", True):
+            return torch.log(stress.double())
+        return torch.zeros_like(stress, dtype=torch.float64)
+
     def _state_mean(self, phi: torch.Tensor, stress: torch.Tensor) -> torch.Tensor | None:
         if not self.hparams.get("on_state_mean", False):
             return None
-        return state_mean(self.state_table.cpu(), phi.cpu(), torch.log(stress.double()).cpu()).to(
-            stress.device
-        )
+        return state_mean(self.state_table.cpu(), phi.cpu(), self._state_key(stress).cpu()).to(stress.device)
 
     def _learned(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor, phi=None) -> torch.Tensor:
         """Transformed targets (G, 3) -> the space the network learns in (before standardisation)."""
@@ -389,7 +395,7 @@ class SurrogateModule(L.LightningModule):
             scored = torch.ones_like(y, dtype=torch.bool)
             scored[:, 0] = ~jammed.view(-1).bool()
             corrected = self._corrected_targets(y.double(), stress.double(), u.double())
-            self.state_table.copy_(state_table(phi, torch.log(stress.double()), corrected, scored))
+            self.state_table.copy_(state_table(phi, self._state_key(stress), corrected, scored))
         learned = self._learned(y.double(), stress.double(), u.double(), phi)
         self.target_mean.copy_(learned.mean(dim=0))
         self.target_std.copy_(_spread(learned))

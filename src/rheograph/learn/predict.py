@@ -134,6 +134,8 @@ def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tupl
     """Per-snapshot in-domain flags (S,) and the reasons for any snapshot outside."""
     reasons = []
     for key, value in (("phi", snaps.phi), ("stress", snaps.stress)):
+        if key == "stress" and not np.isfinite(value):  # a positions-only model is not told it
+            continue
         low, high = domain[key]
         # phi to the 1e-3 a file's stated value may differ from its radii and box by (check_geometry)
         slack = 1e-3 if key == "phi" else 1e-9 * high
@@ -239,11 +241,25 @@ class Surrogate:
             solve_numerics=self.solve_numerics(snaps.phi, snaps.n_particles),
             training=False,
         )
+        positions_only = not self.settings.stress_known
+        if positions_only:
+            # the network predicts Pi / sigma: read it out in units of sigma (sigma = 1 for the module's
+            # conversion), then in sigma0 where the snapshot states sigma
+            for g in graphs:
+                g.stress = torch.ones_like(g.stress)
         preds = []
         for module, _, _ in self.models:
             pred, true, meta = predict_dataset(module, graphs, batch_size=64)
             preds.append(pred)
         preds = np.stack(preds)  # (models, S, 3)
+        extra = {}
+        if positions_only:
+            per_stress = preds[:, :, 1].copy()
+            extra["pressure_per_stress_pred"] = per_stress.mean(axis=0)
+            extra["pressure_per_stress_pred_std"] = per_stress.std(axis=0)
+            extra["mu_eff_pred"] = (1.0 / per_stress).mean(axis=0)  # sigma / Pi, the bulk friction
+            preds[:, :, 1] = per_stress * snaps.stress  # NaN where sigma is unknown
+            meta["stress"] = np.full(len(graphs), snaps.stress)
         in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings.edge_features)
         if notes:
             in_domain[:] = False
@@ -263,12 +279,17 @@ class Surrogate:
             "in_domain": in_domain.astype(np.int64),
             "notes": np.array(["; ".join(reasons) if not ok or notes else "" for ok in in_domain]),
         }
-        if "jam_map" in self.domain:
+        out.update(extra)
+        if "jam_map" in self.domain and not positions_only:
             out["jammed_fraction"] = jammed_fraction(self.domain["jam_map"], meta["phi"], meta["stress"])
         # physics only, nothing learned: the one-solve eta_r, the contact-spring pressure, the counted Z_mu
         physics = np.concatenate([g.physics.numpy() for g in graphs])
         out.update(eta_solve=physics[:, 0], pressure_spring=physics[:, 1], z_mu_counted=physics[:, 2])
-        errors = predicted_error(self.error_model, meta["stress"], meta["phi"]) if self.error_model else None
+        errors = (
+            predicted_error(self.error_model, meta["stress"], meta["phi"])
+            if self.error_model and not positions_only
+            else None
+        )
         for k, name in enumerate(TARGET_NAMES):
             out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
             out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
@@ -283,7 +304,7 @@ class Surrogate:
         radii,
         box,
         le_offset,
-        stress: float,
+        stress: float | None,
         phi: float,
         *,
         strain=None,
@@ -296,7 +317,7 @@ class Surrogate:
     ) -> dict:
         """Predict for configurations given as arrays (units of the small radius a): ``positions`` (S, N, 2)
         or (N, 2), ``radii`` (N,), ``box`` = (Lx, Ly), ``le_offset`` (S,) or a number (x-shift of the
-        periodic image above), ``stress`` σ/σ0, ``phi``, and the physical parameters as keyword
+        periodic image above), ``stress`` σ/σ0 (None: unknown, for a positions-only model), ``phi``, and the physical parameters as keyword
         arguments named as the ``sim.*`` keys (``mu``, ``kn_coefficient``, ``kt_ratio``, ``delta``,
         ``lub_max_gap``).  Optional: ``strain`` and the true ``eta_r``, ``pressure``, ``z_mu`` (S,) for the
         ``*_sim`` columns; ``position_noise`` [a], the positions' RMS precision per coordinate (an

@@ -195,6 +195,12 @@ def card_markdown(card: dict) -> str:
             "* The positions' RMS precision `position_noise` (a) is an input: a snapshot must state it "
             "(file key, `predict.py --position-noise`, or `position_noise=` in `model.predict`)."
         )
+    if graph.get("stress_known", True) is False:
+        lines.append(
+            "* Positions only: the imposed stress is not an input (a snapshot need not state it).  Π is "
+            "learned per stress: the model predicts μ_eff = σ/Π and Π/σ, and Π in σ0 only where σ is "
+            "given (with k_n ∝ σ, positions do not fix Π in σ0)."
+        )
     if card.get("on_state_mean"):
         lines.append(
             "* Each target is learned as the deviation from the training folds' mean at the snapshot's "

@@ -120,6 +120,7 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         viscosity_scale=settings.viscosity_scale,
         pressure_scale=settings.pressure_scale,
         pressure_per_stress=settings.pressure_per_stress,
+        state_mean_by_stress=settings.stress_known,
         z_mu_input=(settings.graph_inputs.index("frictional_coordination") if settings.z_mu_on_count else -1),
         viscosity_input=(
             settings.graph_inputs.index("solve_viscosity") if settings.viscosity_on_solve else -1
