@@ -72,11 +72,14 @@ def relaxed(snaps, eps: float, strain: float, every: int, rng):
 def fold_rows(
     run_dir: Path, k: int, noises, seed: int, cache_dir: Path, relax_strain: float = 0.0, relax_every: int = 4
 ) -> dict:
-    """{(predictor, ε): (pred (G, 3), true (G, 3), groups (G,), jammed (G,))} for fold ``k``."""
+    """{(predictor, ε): (pred (G, 3), true (G, 3), groups (G,), jammed (G,), stress (G,))} for fold
+    ``k``."""
     import dataclasses
 
+    import torch
+
     from rheograph.graphs.dataset import SnapshotGraphDataset, snapshot_graphs
-    from rheograph.io.snapshots import read_snapshots
+    from rheograph.io.snapshots import read_snapshots, wrap_into_box
     from rheograph.learn.baselines import dataset_arrays, descriptor_trees, physics_rows
     from rheograph.learn.datamodule import split_files
     from rheograph.learn.module import physical_targets
@@ -99,9 +102,12 @@ def fold_rows(
         for run in runs:
             snaps = read_snapshots(files[int(run)])
             if eps:
+                noisy = snaps.positions + rng.normal(0.0, eps, snaps.positions.shape)
                 snaps = dataclasses.replace(
                     snaps,
-                    positions=snaps.positions + rng.normal(0.0, eps, snaps.positions.shape),
+                    positions=np.stack(
+                        [wrap_into_box(p, snaps.lx, snaps.ly, o) for p, o in zip(noisy, snaps.le_offset)]
+                    ),
                     contacts=None,
                     position_noise=eps,
                 )
@@ -109,7 +115,8 @@ def fold_rows(
         pred, true, meta = predict_dataset(module, graphs)
         groups = state_point_key(meta["phi"], meta["stress"])
         jammed = meta["jammed"]
-        out[("graph network", eps)] = (pred, true, groups, jammed)
+        stress = meta["stress"]
+        out[("graph network", eps)] = (pred, true, groups, jammed, stress)
         test = {
             "descriptors": np.concatenate([g.descriptors.numpy() for g in graphs]),
             "stress": meta["stress"],
@@ -122,6 +129,7 @@ def fold_rows(
             true,
             groups,
             jammed,
+            stress,
         )
         rows = physics_rows(fitted, test, settings.viscosity_scale)
         out[("physics: one-solve η_r + offset, spring Π, counted Z_μ", eps)] = (
@@ -129,9 +137,26 @@ def fold_rows(
             true,
             groups,
             jammed,
+            stress,
         )
         assert np.allclose(true, saved["true"]), "the test snapshots are not those of the training run"
-        out[("lookup: mean at (φ, σ)", eps)] = (lookup, true, groups, jammed)
+        out[("lookup: mean at (φ, σ)", eps)] = (lookup, true, groups, jammed, stress)
+        if not settings.stress_known:
+            # what a positions-only model must beat: the training folds' mean at phi alone (log eta_r,
+            # log Pi / sigma, Z_mu), sigma unknown
+            train = np.r_[split["train"], split["val"]]
+            y = dataset.y_raw[torch.as_tensor(train)].numpy()
+            train_stress = dataset.stress[torch.as_tensor(train)].numpy()
+            flowing = ~dataset.jammed[torch.as_tensor(train)].numpy()
+            per_phi = np.stack(
+                [
+                    np.full(len(stress), np.exp(np.mean(np.log(y[flowing, 0])))),
+                    stress * np.exp(np.mean(np.log(y[:, 1] / train_stress))),
+                    np.full(len(stress), y[:, 2].mean()),
+                ],
+                axis=1,
+            )
+            out[("lookup: mean at φ (σ unknown)", eps)] = (per_phi, true, groups, jammed, stress)
         if relax_strain and not settings.noise_range:
             graphs = []
             for run in runs:
@@ -139,12 +164,13 @@ def fold_rows(
                 graphs += snapshot_graphs(snaps, settings, int(run))
             pred, true, meta = predict_dataset(module, graphs)
             name = f"graph network on positions relaxed by Δγ = {relax_strain:g} (every {relax_every}th)"
-            out[(name, eps)] = (pred, true, state_point_key(meta["phi"], meta["stress"]), meta["jammed"])
+            key = state_point_key(meta["phi"], meta["stress"])
+            out[(name, eps)] = (pred, true, key, meta["jammed"], meta["stress"])
     return out
 
 
 def main(argv=None) -> int:
-    from rheograph.learn.module import fold_metrics
+    from rheograph.learn.module import fold_metrics, r2_score
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", help="training run directories (fold*.pt, fold*_split.json)")
@@ -189,8 +215,16 @@ def main(argv=None) -> int:
                 pred, true = np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
                 groups = np.concatenate([p[2] for p in parts])
                 jammed = np.concatenate([p[3] for p in parts])
+                stress = np.concatenate([p[4] for p in parts])
                 scores[eps] = fold_metrics(pred, true, groups, jammed)
-            for key, label in (*METRICS, ("fluct_eta", "fluct. η_r"), ("within15_eta", "±15 % η_r")):
+                # the bulk friction mu_eff = sigma / Pi: what a positions-only model predicts of Pi
+                # (on the snapshots whose true and predicted Pi are positive: mu_eff is undefined else)
+                ok = (pred[:, 1] > 0) & (true[:, 1] > 0)
+                scores[eps]["r2_log_mu_eff"] = r2_score(
+                    np.log(stress[ok] / pred[ok, 1]), np.log(stress[ok] / true[ok, 1])
+                )
+            rows_of = (*METRICS, ("r2_log_mu_eff", "R² log μ_eff"), ("fluct_eta", "fluct. η_r"))
+            for key, label in (*rows_of, ("within15_eta", "±15 % η_r")):
                 cells = " | ".join(f"{scores[eps][key]:.3f}" for eps in args.noise)
                 lines.append(f"| {name} | {label} | {cells} |")
         lines.append("")

@@ -251,9 +251,9 @@ def test_positions_only_model_predicts_without_the_stress(tiny_files, tmp_path):
     """graph=imaging_positions: trained through train.py, it predicts eta_r, Z_mu and mu_eff = sigma/Pi
     from positions alone; Pi in sigma0 only where the snapshot states sigma.  Exact models refuse a
     snapshot without a stress by name."""
+    from conftest import ROOT, tiny_training_overrides
     from hydra import compose, initialize_config_dir
 
-    from conftest import ROOT, tiny_training_overrides
     from rheograph.learn.predict import load_model
     from rheograph.learn.train import train_folds
 
