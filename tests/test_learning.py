@@ -1097,3 +1097,19 @@ def test_a_target_without_spread_in_training_is_standardised_by_one_not_by_zero(
     module.fit_target_scaling(y * 2.0, torch.ones(3), torch.zeros(3, 1))
     torch.testing.assert_close(module.target_std.float(), torch.tensor([2.0, 2.0, 1.0]))
     torch.testing.assert_close(module.reference_std.float(), torch.tensor([2.0, 2.0, 1.0]))
+
+
+def test_r2_is_scikit_learns_and_nan_where_undefined():
+    from sklearn.metrics import r2_score as sklearn_r2
+
+    from rheograph.learn.module import r2_score
+
+    rng = np.random.default_rng(0)
+    true = rng.normal(size=50)
+    pred = true + rng.normal(scale=0.3, size=50)
+    assert r2_score(pred, true) == pytest.approx(sklearn_r2(true, pred))
+    assert r2_score(pred, true) == pytest.approx(
+        1 - np.sum((true - pred) ** 2) / np.sum((true - true.mean()) ** 2)
+    )
+    assert np.isnan(r2_score(pred, np.ones(50)))  # constant truth
+    assert np.isnan(r2_score(np.r_[pred[:-1], np.nan], true))  # a missing prediction

@@ -30,9 +30,14 @@ def physical_targets(y_transformed: np.ndarray, viscosity_scale: float, pressure
 
 
 def r2_score(pred: np.ndarray, true: np.ndarray) -> float:
-    ss_res = float(np.sum((true - pred) ** 2))
-    ss_tot = float(np.sum((true - true.mean()) ** 2))
-    return 1.0 - ss_res / ss_tot if ss_tot > 0 else float("nan")
+    """Coefficient of determination of ``pred`` against ``true`` (scikit-learn's); NaN where ``true``
+    does not vary (undefined: scikit-learn would report 1 or -inf there) or ``pred`` is not finite."""
+    from sklearn.metrics import r2_score as sklearn_r2
+
+    true, pred = np.asarray(true, dtype=np.float64), np.asarray(pred, dtype=np.float64)
+    if true.size < 2 or not np.ptp(true) > 0 or not np.isfinite(pred).all():
+        return float("nan")  # (a NaN prediction, e.g. a physics row without its solve, scores NaN)
+    return float(sklearn_r2(true, pred))
 
 
 LOG_TARGETS = ("eta", "pressure")  # scored on a log scale too (seed paper), Z_mu only linearly
