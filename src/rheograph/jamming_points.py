@@ -298,7 +298,10 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
             if pts:
                 p, s = np.array(pts).T
                 ax.scatter(p, s, marker=marker, color=color, s=22, label=label, alpha=0.6)
-        fit = next((r["wyart_cates"] for r in rows if r["n"] == n and "wyart_cates" in r), None)
+        # the Wyart-Cates fit with beta fitted, and the branch divergences (beta fitted) beside it
+        fit = next(
+            (r["wyart_cates"] for r in rows if r["n"] == n and "wyart_cates" in r and r["beta_ci"]), None
+        )
         if fit:
             stresses = sorted({r["stress"] for r in frictional if flowing(r)})
             f = [
@@ -309,15 +312,25 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
                 wyart_cates(np.array(f), fit["phi_j0"], fit["phi_jmu"]),
                 stresses,
                 "k-",
-                label="φ_m(f), Wyart–Cates",
+                label=r"$\phi_m(f)$, Wyart–Cates ($\beta$ fitted)",
             )
-            ax.axvline(fit["phi_j0"], color="0.5", ls=":", label=f"φ_J^0 = {fit['phi_j0']:.3f}")
-            ax.axvline(fit["phi_jmu"], color="0.5", ls="--", label=f"φ_J^μ = {fit['phi_jmu']:.3f}")
+        for quantity, style in (("phi_J^0", ":"), ("phi_J^mu", "--")):
+            row = next(
+                (
+                    r
+                    for r in rows
+                    if r["n"] == n and r["quantity"] == quantity and r["method"] == "divergence, beta fitted"
+                ),
+                None,
+            )
+            if row:
+                symbol = r"$\phi_J^0$" if quantity == "phi_J^0" else r"$\phi_J^\mu$"
+                ax.axvline(row["phi_j"], color="0.4", ls=style, label=f"{symbol} (divergence)")
         ax.set_xscale("linear")
         ax.set_yscale("log")
-        ax.set_xlabel("φ")
+        ax.set_xlabel(r"$\phi$")
         ax.set_title(f"N = {n}")
-    axes[0][0].set_ylabel("σ / σ0")
+    axes[0][0].set_ylabel(r"$\sigma/\sigma_0$")
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
