@@ -1,5 +1,5 @@
 """Campaign cost: CPU seconds per unit strain of every committed run, per (N, φ, σ), and the CPU hours a
-full grid costs, so that the size of the dataset can be planned (issue #11).
+full grid costs, so that the size of the dataset can be planned.
 
     python bench/campaign_cost.py [--index data/paper/index.json] \\
         [--extra 'data/scheme_phi080/*/trajectory.h5']
@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SEEDS_PLANNED = {400: 3, 2000: 2}  # issue #13's grid
+SEEDS_PLANNED = {400: 3, 2000: 2}  # the paper-scale grid
 
 
 def run_row(path: Path, params: dict, status: str, strain: float) -> dict:

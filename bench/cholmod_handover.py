@@ -1,5 +1,5 @@
-"""What CHOLMOD is handed: the symmetrised full matrix (before session 11) or its lower triangle alone (what
-CHOLMOD reads, the default since).  Times the numeric factorisation of one resistance matrix captured from a
+"""What CHOLMOD is handed: the symmetrised full matrix or its lower triangle alone (what CHOLMOD reads,
+the default).  Times the numeric factorisation of one resistance matrix captured from a
 flowing run, the two hand-overs alternating, and checks that their solutions agree bit for bit.
 
     OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python bench/cholmod_handover.py [--n 400 2000]

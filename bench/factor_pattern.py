@@ -1,5 +1,5 @@
-"""What do the Verlet skin's explicit zeros and the symbolic analysis cost the factorisation?  (issue #11,
-lever 2: "reuse the symbolic analysis across Verlet-list rebuilds")
+"""What do the Verlet skin's explicit zeros and the symbolic analysis cost the factorisation?  (Can the
+symbolic analysis be reused across Verlet-list rebuilds?)
 
     OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python bench/factor_pattern.py [--n 400 2000]
 

@@ -1,5 +1,5 @@
 """Can a recent Cholesky factor replace a fresh one?  Conjugate gradients on each step's resistance matrix,
-preconditioned with the factor of an earlier step, against the direct solve (issue #11, lever 2).
+preconditioned with the factor of an earlier step, against the direct solve .
 
     OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python bench/factor_reuse.py [--n 400 2000] [--lags 1 2 5 10]
 

@@ -123,8 +123,9 @@ def write(results: dict, args) -> None:
         + (", " + " ".join(args.overrides) if args.overrides else "")
         + "); mean ± std over test folds.  Split: grouped = whole trajectories held out (the estimate "
         "that counts), random = snapshots (the seed paper's protocol).  Baselines (same folds): "
-        "gradient-boosted trees on physics descriptors + log σ (the issue's), and the same trees given "
-        "the one-solve η_r and the counted Z_μ that the network is given.  Paper: the seed paper's "
+        "gradient-boosted trees on physics descriptors + log σ (the reference baseline), and the same "
+        "trees given the one-solve η_r and the counted Z_μ that the network is given.  Paper: the seed "
+        "paper's "
         "reported values (random split).",
         "",
         "| split | N | φ | R² log η_r | R² log Π | R² Z_μ | trees: log η_r / log Π / Z_μ "

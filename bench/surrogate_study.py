@@ -11,7 +11,7 @@ features, softmax aggregation, mean pooling, positions only); ``physics_position
 features, positions only; ``physics`` = physics-aware features + imposed stress (graph input and CLM
 load); ``physics_solve`` = ``physics`` + the one-solve viscosity and the counted Z_μ, both targets learned
 as corrections to them (graph=physics_solve, the default); ``physics_solve_uncorrected`` = the same inputs
-read through the head (the default of session 11);
+read through the head (an earlier default);
 ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
 stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation;
 ``physics_pi_sigma0`` = ``physics`` learning Pi in sigma0 (graph.pressure_per_stress=false) with the
@@ -43,7 +43,7 @@ VARIANTS = {
     "physics_positions": ["graph=physics_positions", "model=resgcn_physics"],
     "physics": ["graph=physics", "model=resgcn_physics"],
     "physics_solve": ["graph=physics_solve", "model=resgcn_physics"],
-    # the default inputs as they were before the corrections became default (session 11)
+    # the default inputs as they were before the corrections became default
     "physics_solve_uncorrected": [
         "graph=physics_solve",
         "model=resgcn_physics",

@@ -1,4 +1,4 @@
-"""Surrogate cost (issue #9): what training costs, what makes it cheaper, and accuracy against size and speed.
+"""Surrogate cost: what training costs, what makes it cheaper, and accuracy against size and speed.
 All on the committed paper-scale set (held-out whole trajectories, ``data.split=grouped``), this machine.
 
     OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py levers    # s/epoch of each speed lever, one fold

@@ -84,10 +84,11 @@ def main(argv=None) -> None:
     text = "\n\n".join(
         [
             "Objective: best-epoch `val/target_loss` (unweighted sum of the per-target Huber losses of "
-            "the transformed targets in units of their training spread — since session 12; before, on "
-            "the standardised learned targets, the same number unless Π is learned per σ or a target "
-            "as a correction) on the validation trajectories of fold 0, φ = 0.76, N = 400, 30 "
-            "epochs (cosine schedule); TPE sampler, median pruner per epoch (after 5 trials and 10 "
+            "the transformed targets in units of their training spread; a study stored with the "
+            "objective on the standardised learned targets gives the same number unless Π is learned "
+            "per σ or a target as a correction) on the validation trajectories of fold 0, φ = 0.76, "
+            "N = 400, 30 epochs (cosine schedule); TPE sampler, median pruner per epoch (after 5 trials "
+            "and 10 "
             "epochs).  Categorical values shown as sampled.",
             *sections,
             "Command: `python tune.py hparams_search=held_out_phi076 inputs=<physics|paper|"

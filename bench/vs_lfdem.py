@@ -1,6 +1,6 @@
 """Side by side with LF_DEM: CPU seconds per unit strain, steps per strain and cost per step of rheograph and
 of the C++ reference code LF_DEM (public repository ryseto/LF_DEM), both run on one pinned core of this
-machine from the same initial configuration, at phi = 0.76, sigma/sigma0 = 10 (issue #11).
+machine from the same initial configuration, at phi = 0.76, sigma/sigma0 = 10.
 
     python bench/vs_lfdem.py --lfdem /work/lfdem/bin/LF_DEM                # N = 400, 2000; 3 repeats
     LFDEM_BINARY=/work/lfdem/bin/LF_DEM python bench/vs_lfdem.py --n 400 --strains 0.02 0.04 \\
@@ -446,7 +446,7 @@ def main(argv=None) -> int:
     )
     for n in args.n:  # one section per system size, so that sizes can be measured in separate runs
         lines = [
-            f"### Side by side with LF_DEM (issue #11), N = {n}",
+            f"### Side by side with LF_DEM, N = {n}",
             "",
             f"Machine: {os.cpu_count()} cores; every run a child process pinned to core {args.core}, "
             "single-threaded (OPENBLAS/OMP/NUMBA threads 1, OMP_THREAD_LIMIT=1); CPU = user + system time "

