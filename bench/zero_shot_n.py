@@ -97,8 +97,9 @@ def main(argv=None) -> int:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
+        seen = "yes" if r["zero_shot"] else "no: its training N"
         lines.append(
-            f"| {r['n']} | {r['phi']:g} | {r['model']} | {'yes' if r['zero_shot'] else 'no: its training N'} | "
+            f"| {r['n']} | {r['phi']:g} | {r['model']} | {seen} | "
             f"{r['snapshots']} | {r['stresses']} | "
             f"{r['r2_log_eta']:.4f} | {r['r2_log_pressure']:.5f} | {r['r2_z_mu']:.5f} | "
             f"{r['fluct_eta']:.3f} |"
