@@ -2,6 +2,7 @@
 a noisy configuration, the noise domain of a model and the imaging model end to end."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from rheograph.graphs.features import (
 )
 from rheograph.io.snapshots import read_snapshots, wrap_into_box
 
+ROOT_DATA = Path(__file__).resolve().parents[1] / "data" / "paper" / "multirun"
 IMAGING = dict(
     edge_features=("gap", "dx", "dy", "nxny", "nxx_nyy"),
     graph_inputs=("log_stress", "position_noise", *SHELL_INPUTS),
@@ -290,3 +292,23 @@ def test_positions_only_model_predicts_without_the_stress(tiny_files, tmp_path):
     exact = load_model("N400_phi0.76")
     with pytest.raises(InputError, match="imposed stress"):
         exact.predict(stress=None, **{**values, "position_noise": None})
+
+
+def test_shipped_imaging_model_serves_noisy_snapshots_and_the_exact_one_points_to_it():
+    import rheograph
+
+    path = ROOT_DATA / "N400_phi0.76_s10_seed1_d0.002_implicit" / "trajectory.h5"
+    snaps = read_snapshots(path)
+    rng = np.random.default_rng(0)
+    positions = snaps.positions[-1] + rng.normal(0.0, 0.01, snaps.positions[-1].shape)
+    values = dict(
+        positions=positions, radii=snaps.radii, box=(snaps.lx, snaps.ly), le_offset=snaps.le_offset[-1],
+        stress=snaps.stress, phi=snaps.phi, mu=0.5, kn_coefficient=2e4, kt_ratio=0.5, delta=1e-3,
+        lub_max_gap=0.5, position_noise=0.01, eta_r=snaps.targets[-1:, 0],
+    )  # fmt: skip
+    exact = rheograph.load_model("N400_phi0.76").predict(**values)
+    assert exact["in_domain"][0] == 0 and "N400_phi0.76_imaging" in exact["notes"][0]
+    imaging = rheograph.load_model("N400_phi0.76_imaging").predict(**values)
+    assert imaging["in_domain"][0] == 1 and imaging["notes"][0] == ""
+    # within a factor 2 of the simulator's eta_r at 0.01 a of noise (the exact model is off by orders)
+    assert 0.5 < imaging["eta_pred"][0] / snaps.targets[-1, 0] < 2.0

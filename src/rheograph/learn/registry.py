@@ -211,6 +211,16 @@ def card_markdown(card: dict) -> str:
         "",
         "## Held-out R² (mean over folds)",
         "",
+        *(
+            [
+                "On noisy copies of the test trajectories (noise log-uniform over the trained range, "
+                "several copies per snapshot, every predictor on the same copies); by noise level: "
+                "the project's results page (`python bench/snapshot_noise.py`).",
+                "",
+            ]
+            if isinstance(card["position_noise"], list)
+            else []
+        ),
         "| model | R² log η_r | R² log Π | R² Z_μ |",
         "|---|---|---|---|",
     ]
