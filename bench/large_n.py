@@ -38,10 +38,6 @@ def run_cost(path: Path) -> dict | None:
         counters = json.loads(h5["checkpoint"].attrs["counters"])
     # a finished run's summary, or a running one's last checkpoint
     cpu = float(summary.get("cpu_seconds", counters.get("cpu_seconds", np.nan)))
-    if not np.isfinite(cpu):  # files written before the CPU time was recorded: their simulate.log
-        from rheograph.dataset_card import run_cpu_seconds
-
-        cpu = run_cpu_seconds(path)
     steps, strain = int(info["steps"]), float(info["strain"])
     return {
         "path": path,
@@ -91,7 +87,9 @@ def main(argv=None) -> int:
                 continue
             if args.stress and not any(np.isclose(row["stress"], s) for s in args.stress):
                 continue
-            if "implicit" not in path.parent.name or row["steps"] <= 0:
+            # runs that did not record their CPU time (older files: their logs' wall seconds include the
+            # start-up) are left out
+            if "implicit" not in path.parent.name or row["steps"] <= 0 or not np.isfinite(row["cpu"]):
                 continue
             row["fill"], row["nnz_per_dof"] = factor_fill(path)
             rows.append(row)
