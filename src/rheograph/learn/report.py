@@ -102,6 +102,7 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     run_dir = Path(run_dir)
     lines = [f"# Surrogate report ({len(fold_results)} fold(s), split: **{split}**)", ""]
@@ -224,6 +225,13 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
         if t != "z_mu" and lo > 0:
             ax.set_xscale("log")
             ax.set_yscale("log")
+            # labels at 1, 2, 5 x 10^n in plain numbers, none on the minor ticks: matplotlib labels
+            # the minor ticks of a log axis spanning less than about a decade and a half, and they
+            # run into each other
+            for axis in (ax.xaxis, ax.yaxis):
+                axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+                axis.set_minor_formatter(NullFormatter())
     axes[0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(run_dir / "parity.png", dpi=110)
