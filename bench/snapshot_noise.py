@@ -24,6 +24,7 @@ import argparse
 import json
 import shlex
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,12 @@ from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
+
+
+def _one_thread() -> None:
+    import torch
+
+    torch.set_num_threads(1)
 
 
 def relaxed(snaps, eps: float, strain: float, every: int, rng):
@@ -93,7 +100,10 @@ def fold_rows(
     files = split_files(split, ROOT)
     dataset = SnapshotGraphDataset(files, settings, cache_dir)
     fitted = dataset_arrays(dataset, np.r_[split["train"], split["val"]])
-    lookup = saved["baseline_stress_mean"]  # physical predictions; reads no positions
+    # the lookup (physical predictions; reads no positions) per state point: a run trained on noisy
+    # copies (graph.noise_copies) saved several rows per snapshot
+    saved_keys = state_point_key(saved["phi"], saved["stress"])
+    lookup_at = {key: row for key, row in zip(saved_keys, saved["baseline_stress_mean"])}
     rng = np.random.default_rng(seed + 1000 * k)
     out = {}
     runs = np.unique(saved["run_id"])
@@ -139,7 +149,9 @@ def fold_rows(
             jammed,
             stress,
         )
-        assert np.allclose(true, saved["true"]), "the test snapshots are not those of the training run"
+        copies = max(1, settings.noise_copies)
+        assert true.shape[0] * copies == saved["true"].shape[0], "not the test snapshots of the training run"
+        lookup = np.stack([lookup_at[key] for key in groups])
         out[("lookup: mean at (φ, σ)", eps)] = (lookup, true, groups, jammed, stress)
         if not settings.stress_known:
             # what a positions-only model must beat: the training folds' mean at phi alone (log eta_r,
@@ -180,6 +192,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cache-dir", default=str(ROOT / "data" / "cache"))
     ap.add_argument("--relax-strain", type=float, default=0.0, help="also score relaxed positions (0: no)")
     ap.add_argument("--relax-every", type=int, default=4, help="relax every n-th test snapshot")
+    ap.add_argument("--workers", type=int, default=1, help="folds scored in parallel processes")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     lines = [
@@ -194,10 +207,14 @@ def main(argv=None) -> int:
     for run in args.runs:
         run_dir = Path(run)
         pooled = {}
-        for k in args.folds:
-            rows = fold_rows(
-                run_dir, k, args.noise, args.seed, Path(args.cache_dir), args.relax_strain, args.relax_every
-            )
+        score = [run_dir, args.noise, args.seed, Path(args.cache_dir), args.relax_strain, args.relax_every]
+        if args.workers > 1:
+            with ProcessPoolExecutor(max_workers=args.workers, initializer=_one_thread) as pool:
+                jobs = [pool.submit(fold_rows, score[0], k, *score[1:]) for k in args.folds]
+                results = [job.result() for job in jobs]
+        else:
+            results = [fold_rows(score[0], k, *score[1:]) for k in args.folds]
+        for rows in results:
             for key, value in rows.items():
                 pooled.setdefault(key, []).append(value)
         predictors = list(dict.fromkeys(name for name, _ in pooled))
