@@ -88,3 +88,27 @@ def sheared_frictional_problem(n_particles: int = 100, size_ratio: float = 1.4, 
         sim.indptr, sim.pair_slot, sim.diag_slot, sim.indices.shape[0],
     )  # fmt: skip
     return sim, lp, dense_from_upper_csc(lp.data, sim.indices, sim.indptr, 3 * n_particles)
+
+
+def train_tiny_fold(tiny_files, tmp_path, *overrides):
+    """Fold 0 of a 2-epoch ``train.py`` run on the tiny runs with ``overrides``, into tmp_path/run (no
+    logger, no report); returns the run directory."""
+    from hydra import compose, initialize_config_dir
+
+    from rheograph.learn.train import train_folds
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(
+            "train",
+            overrides=[
+                *overrides,
+                *tiny_training_overrides(tiny_files, tmp_path),
+                "trainer.max_epochs=2",
+                "trainer.enable_progress_bar=false",
+                "~logger",
+                "report=false",
+                "fold=0",
+            ],
+        )
+    train_folds(cfg, tmp_path / "run")
+    return tmp_path / "run"

@@ -3,29 +3,17 @@ lookup independent of the noise, the exact network degraded by it."""
 
 import re
 
-from conftest import ROOT, load_bench_script, tiny_training_overrides
-from hydra import compose, initialize_config_dir
+from conftest import load_bench_script, train_tiny_fold
 
 
 def test_noise_bench_scores_every_predictor_on_a_tiny_run(tiny_files, tmp_path, capsys):
-    from rheograph.learn.train import train_folds
-
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(
-            "train",
-            overrides=[
-                *tiny_training_overrides(tiny_files, tmp_path),
-                "data.split=grouped",  # the bench scores whole held-out trajectories
-                "trainer.max_epochs=2",
-                "trainer.enable_progress_bar=false",
-                "~logger",
-                "report=false",
-                "fold=0",
-            ],
-        )
-    train_folds(cfg, tmp_path / "run")
+    run_dir = train_tiny_fold(
+        tiny_files,
+        tmp_path,
+        "data.split=grouped",  # the bench scores whole held-out trajectories
+    )
     bench = load_bench_script("snapshot_noise")
-    args = [str(tmp_path / "run"), "--folds", "0", "--noise", "0", "0.01", "--no-write"]
+    args = [str(run_dir), "--folds", "0", "--noise", "0", "0.01", "--no-write"]
     args += ["--cache-dir", str(tmp_path / "cache"), "--relax-strain", "0.002", "--relax-every", "5"]
     assert bench.main(args) == 0
     text = capsys.readouterr().out

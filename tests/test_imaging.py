@@ -147,31 +147,16 @@ def test_noise_domain_of_exact_and_imaging_models():
 
 def test_imaging_model_end_to_end_needs_the_noise_level(tiny_files, tmp_path):
     """Trains a tiny imaging model through train.py and predicts bare snapshots with it."""
-    from conftest import ROOT, tiny_training_overrides
-    from hydra import compose, initialize_config_dir
+    from conftest import train_tiny_fold
 
     from rheograph.learn.predict import load_model
-    from rheograph.learn.train import train_folds
 
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(
-            "train",
-            overrides=[
-                "graph=imaging",
-                *tiny_training_overrides(tiny_files, tmp_path),
-                "trainer.max_epochs=2",
-                "trainer.enable_progress_bar=false",
-                "~logger",
-                "report=false",
-                "fold=0",
-            ],
-        )
-    train_folds(cfg, tmp_path / "run")
-    model = load_model(tmp_path / "run")
+    run_dir = train_tiny_fold(tiny_files, tmp_path, "graph=imaging")
+    model = load_model(run_dir)
     # the Lightning checkpoint beside the bundle holds the same model
     from rheograph.learn.module import SurrogateModule
 
-    checkpoint = SurrogateModule.load_from_checkpoint(tmp_path / "run" / "fold0.ckpt", map_location="cpu")
+    checkpoint = SurrogateModule.load_from_checkpoint(run_dir / "fold0.ckpt", map_location="cpu")
     bundle = model.models[0][0].state_dict()
     assert all(torch.equal(v, checkpoint.state_dict()[k]) for k, v in bundle.items())
     snaps = read_snapshots(tiny_files[2])
@@ -253,29 +238,14 @@ def test_positions_only_model_predicts_without_the_stress(tiny_files, tmp_path):
     """graph=imaging_positions: trained through train.py, it predicts eta_r, Z_mu and mu_eff = sigma/Pi
     from positions alone; Pi in sigma0 only where the snapshot states sigma.  Exact models refuse a
     snapshot without a stress by name."""
-    from conftest import ROOT, tiny_training_overrides
-    from hydra import compose, initialize_config_dir
+    from conftest import train_tiny_fold
 
     from rheograph.learn.predict import load_model
-    from rheograph.learn.train import train_folds
 
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(
-            "train",
-            overrides=[
-                "experiment=imaging",
-                "graph=imaging_positions",
-                *tiny_training_overrides(tiny_files, tmp_path),
-                "data.split=random",
-                "trainer.max_epochs=2",
-                "trainer.enable_progress_bar=false",
-                "~logger",
-                "report=false",
-                "fold=0",
-            ],
-        )
-    train_folds(cfg, tmp_path / "run")
-    model = load_model(tmp_path / "run")
+    run_dir = train_tiny_fold(
+        tiny_files, tmp_path, "experiment=imaging", "graph=imaging_positions", "data.split=random"
+    )
+    model = load_model(run_dir)
     snaps = read_snapshots(tiny_files[2])
     values = dict(
         positions=snaps.positions[-2:], radii=snaps.radii, box=[snaps.lx, snaps.ly],
