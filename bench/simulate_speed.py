@@ -126,11 +126,11 @@ def main() -> None:
         write_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
 
 
-def publish(section: str, text: str, write: bool) -> None:
-    """Print a result section and (unless the script's --no-write) replace it in docs/benchmarks.md."""
+def publish(section: str, text: str, write: bool, page: str = "benchmarks.md") -> None:
+    """Print a result section and (unless the script's --no-write) replace it in docs/<page>."""
     print(text)
     if write:
-        write_section(ROOT / "docs" / "benchmarks.md", section, text)
+        write_section(ROOT / "docs" / page, section, text)
 
 
 def write_section(path: Path, name: str, body: str, insert_before: str | None = None) -> None:

@@ -23,9 +23,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import write_section  # noqa: E402
+from simulate_speed import publish  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def score(models, paths, min_strain: float) -> list[dict]:
@@ -108,10 +107,7 @@ def main(argv=None) -> int:
         [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
     )
     lines += ["", f"Command: `{command}`"]
-    text = "\n".join(lines)
-    print(text)
-    if not args.no_write:
-        write_section(ROOT / "docs" / "jamming.md", "zero_shot_n", text)
+    publish("zero_shot_n", "\n".join(lines), not args.no_write, page="jamming.md")
     return 0
 
 
