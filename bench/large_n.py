@@ -27,7 +27,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import publish  # noqa: E402
 
 
-
 def run_cost(path: Path) -> dict | None:
     from rheograph.io.hdf5 import read_run_info
 

@@ -26,7 +26,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import publish  # noqa: E402
 
 
-
 def score(models, paths, min_strain: float) -> list[dict]:
     from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.module import fold_metrics
