@@ -114,7 +114,7 @@ def benchmark_config(files, phi, n, split, epochs, fold_workers, batch_size=None
 def run_variant(name: str, split: str, args, out: Path) -> tuple[dict, float]:
     extra = [*VARIANTS[name], f"seed={args.seed}"]
     if name == "paper":  # the paper's constant learning rate over the same epoch budget
-        extra.append("model.lr_schedule=constant")
+        extra.append("model.scheduler=null")
     batch_size = args.batch_size
     if name.endswith("_tuned"):  # the tuned batch size, not the study's common one
         with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):

@@ -57,7 +57,7 @@ RESULTS = ROOT / "docs" / "results" / "train_speed"
 SCORES = ("r2_log_eta", "r2_log_pressure", "r2_z_mu")
 LABELS = {"r2_log_eta": "log η_r", "r2_log_pressure": "log Π", "r2_z_mu": "Z_μ"}
 # before the speed levers: the paper's constant learning rate, batch 16, early stopping (patience 50)
-BEFORE = ["model.lr_schedule=constant", "model.warmup_epochs=0", "callbacks.early_stopping.patience=50"]
+BEFORE = ["model.scheduler=null", "callbacks.early_stopping.patience=50"]
 
 
 def config(args, n, epochs, batch_size, extra=(), split="grouped", fold_workers=1):
@@ -356,7 +356,7 @@ def pareto(args) -> list[dict]:
         layers, width = (int(v) for v in size.split("x"))
         extra = [*VARIANTS[variant], f"model.num_layers={layers}", f"model.hidden={width}"]
         if variant == "paper":
-            extra.append("model.lr_schedule=constant")
+            extra.append("model.scheduler=null")
         cfg = config(args, 400, args.epochs, None, extra)
         scores, seconds, _, module, dm = fit_fold(cfg, 0)
         from rheograph.learn.model import count_parameters

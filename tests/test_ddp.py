@@ -37,7 +37,7 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
         "~callbacks.model_checkpoint",
     ]
     runs = {
-        "untrained": ["trainer.max_epochs=1", "model.lr=1e-12"],
+        "untrained": ["trainer.max_epochs=1", "model.optimizer.lr=1e-12"],
         "single": ["trainer.max_epochs=5"],
         "ddp": ["trainer.max_epochs=5", "trainer=ddp", "trainer.devices=2"],
     }

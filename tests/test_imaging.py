@@ -120,7 +120,7 @@ def test_a_short_shear_relaxes_the_overlaps_that_noise_creates(tiny_files):
         return snapshot_pairs(pos, snaps.radii, snaps.lx, snaps.ly, offset, 0.5, params)["overlap"].max()
 
     exact = largest_overlap(snaps.positions[k], snaps.le_offset[k])
-    relaxed, offset = relax_positions(
+    relaxed, offset, reached = relax_positions(
         noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k], params, 0.05
     )
     # noise of 0.01 a makes overlaps of ~30x those the springs hold; a short stretch of the flow brings
@@ -130,7 +130,15 @@ def test_a_short_shear_relaxes_the_overlaps_that_noise_creates(tiny_files):
     assert largest_overlap(relaxed, offset) < 2 * exact
     # the box was sheared by the strain asked for (the image offset moved by about 0.05 Ly)
     moved = (offset - snaps.le_offset[k]) % snaps.lx
-    assert 0.05 * snaps.ly <= moved < 0.055 * snaps.ly
+    assert 0.05 <= reached < 0.055 and reached * snaps.ly == pytest.approx(moved, rel=1e-9)
+    # a step budget too short for the strain (as for an arrested packing, which creeps) stops there and
+    # says how far it got
+    _, offset, reached = relax_positions(
+        noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k], params, 0.05, max_steps=3
+    )
+    assert 0 < reached < 0.05 and reached * snaps.ly == pytest.approx(
+        (offset - snaps.le_offset[k]) % snaps.lx
+    )
 
 
 def test_noise_domain_of_exact_and_imaging_models():
@@ -282,3 +290,23 @@ def test_shipped_imaging_model_serves_noisy_snapshots_and_the_exact_one_points_t
     assert imaging["in_domain"][0] == 1 and imaging["notes"][0] == ""
     # within a factor 2 of the simulator's eta_r at 0.01 a of noise (the exact model is off by orders)
     assert 0.5 < imaging["eta_pred"][0] / snaps.targets[-1, 0] < 2.0
+
+
+def test_a_snapshot_whose_relaxation_runs_out_of_steps_is_flagged(monkeypatch):
+    """An arrested packing creeps (phi = 0.80, sigma/sigma0 = 200 at N = 400: ~2000 steps for 0.01
+    strain against 50-90 for a flowing one; one that does not move would never get there): relaxation
+    stops at its step budget, and the prediction says its inputs read a partly repaired configuration."""
+    import rheograph
+    from rheograph.graphs import features
+
+    monkeypatch.setattr(features, "RELAX_MAX_STEPS", 5)
+    path = ROOT_DATA / "N400_phi0.76_s10_seed1_d0.002_implicit" / "trajectory.h5"
+    snaps = read_snapshots(path)
+    values = dict(
+        positions=snaps.positions[-1], radii=snaps.radii, box=(snaps.lx, snaps.ly),
+        le_offset=snaps.le_offset[-1], stress=snaps.stress, phi=snaps.phi, mu=0.5, kn_coefficient=2e4,
+        kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5, position_noise=0.01,
+    )  # fmt: skip
+    table = rheograph.load_model("N400_phi0.76_imaging").predict(**values)
+    assert table["in_domain"][0] == 0
+    assert "of its 0.01 strain within its step budget in 1 snapshot(s)" in table["notes"][0]

@@ -71,7 +71,7 @@ def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
         train = compose(config_name="train", overrides=train_overrides)
         merged = OmegaConf.merge(train, OmegaConf.load(tmp_path / "experiment" / "resgcn_best.yaml"))
         assert set(OmegaConf.to_container(merged.model)) == set(OmegaConf.to_container(train.model))
-        assert len(merged.model.loss_weights) == 3 and merged.model.lr > 0
+        assert len(merged.model.loss_weights) == 3 and merged.model.optimizer.lr > 0
         assert isinstance(merged.model.hidden, int) and isinstance(merged.data.batch_size, int)
 
         cfg2 = compose(
@@ -99,20 +99,22 @@ def test_a_trial_whose_process_died_is_failed_and_retried(tmp_path):
         cfg = compose(config_name="tune", overrides=overrides)
     storage = optuna.storages.RDBStorage(cfg.tune.storage, heartbeat_interval=1, grace_period=1)
     killed = optuna.create_study(study_name=cfg.tune.study_name, storage=storage).ask(
-        {"model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True)}
+        {"model.optimizer.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True)}
     )
     storage.record_heartbeat(killed._trial_id)  # it was running, then its process was killed
     time.sleep(2.5)
     study = run_study(
         cfg,
         tmp_path / "trials",
-        objective=lambda trial: trial.suggest_float("model.lr", 1e-4, 1e-2, log=True),
+        objective=lambda trial: trial.suggest_float("model.optimizer.lr", 1e-4, 1e-2, log=True),
     )
     states = [t.state for t in study.trials]
     assert states[0] == optuna.trial.TrialState.FAIL  # no longer RUNNING
     retried = [t for t in study.trials if t.system_attrs.get("failed_trial") == killed.number]
     assert [t.state for t in retried] == [optuna.trial.TrialState.COMPLETE]
-    assert len(retried) == 1 and retried[0].params["model.lr"] == killed.params["model.lr"]
+    assert (
+        len(retried) == 1 and retried[0].params["model.optimizer.lr"] == killed.params["model.optimizer.lr"]
+    )
     assert optuna.trial.TrialState.RUNNING not in states
 
 
@@ -122,21 +124,21 @@ def test_best_experiment_carries_the_tuned_values_and_the_studys_inputs(tmp_path
     from rheograph.learn.tune import write_best_experiment
 
     space = {
-        "model.lr": {"type": "float", "low": 1e-4, "high": 1e-2, "log": True},
+        "model.optimizer.lr": {"type": "float", "low": 1e-4, "high": 1e-2, "log": True},
         "model.hidden": {"type": "categorical", "choices": [32, 64]},
         "model.loss_weights": {"type": "categorical", "choices": [[1.0, 1.0, 1.0], [2.0, 1.0, 1.0]]},
     }
     study = optuna.create_study(study_name="unit_test_search")  # no such experiment in conf/
     dists = {
-        "model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
+        "model.optimizer.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
         "model.hidden": optuna.distributions.CategoricalDistribution(["32", "64"]),
         "model.loss_weights": optuna.distributions.CategoricalDistribution(
             ["[1.0, 1.0, 1.0]", "[2.0, 1.0, 1.0]"]
         ),
     }
     for value, params in [
-        (0.5, {"model.lr": 1e-3, "model.hidden": "32", "model.loss_weights": "[1.0, 1.0, 1.0]"}),
-        (0.2, {"model.lr": 2e-3, "model.hidden": "64", "model.loss_weights": "[2.0, 1.0, 1.0]"}),
+        (0.5, {"model.optimizer.lr": 1e-3, "model.hidden": "32", "model.loss_weights": "[1.0, 1.0, 1.0]"}),
+        (0.2, {"model.optimizer.lr": 2e-3, "model.hidden": "64", "model.loss_weights": "[2.0, 1.0, 1.0]"}),
     ]:
         study.add_trial(optuna.trial.create_trial(params=params, distributions=dists, value=value))
     path = write_best_experiment(study, tmp_path / "experiment", ["graph=paper", "fold=0", "~logger"], space)
@@ -146,7 +148,7 @@ def test_best_experiment_carries_the_tuned_values_and_the_studys_inputs(tmp_path
             overrides=[f"hydra.searchpath=[file://{tmp_path}]", f"experiment={path.stem}"],
         )
         paper = compose(config_name="train", overrides=["graph=paper"])
-    assert cfg.model.lr == 2e-3 and cfg.model.hidden == 64
+    assert cfg.model.optimizer.lr == 2e-3 and cfg.model.hidden == 64
     assert list(cfg.model.loss_weights) == [2.0, 1.0, 1.0]
     assert cfg.graph.edge_features == paper.graph.edge_features  # the inputs it was tuned on
     assert cfg.fold is None and cfg.get("logger") is not None  # the search protocol is not carried
@@ -166,7 +168,9 @@ def test_the_defaults_are_queued_once_as_a_trial():
     (queued,) = study.get_trials(deepcopy=False)
     assert queued.state == optuna.trial.TrialState.WAITING and queued.user_attrs["defaults"]
     params = queued.system_attrs["fixed_params"]
-    assert params["model.lr"] == train.model.lr and params["model.aggr"] == train.model.aggr
+    assert (
+        params["model.optimizer.lr"] == train.model.optimizer.lr and params["model.aggr"] == train.model.aggr
+    )
     assert params["model.loss_weights"] == str(list(train.model.loss_weights))
     assert set(params) == set(cfg.tune.search_space)
 
@@ -205,18 +209,18 @@ def test_a_study_resumed_with_another_search_space_is_refused_by_name():
     study = optuna.create_study(study_name="physics_solve_phi076")
     study.add_trial(
         optuna.trial.create_trial(
-            params={"model.lr": 1e-3, "graph.viscosity_on_solve": "True"},
+            params={"model.optimizer.lr": 1e-3, "graph.viscosity_on_solve": "True"},
             distributions={
-                "model.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
+                "model.optimizer.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
                 "graph.viscosity_on_solve": optuna.distributions.CategoricalDistribution(["False", "True"]),
             },
             value=0.1,
         )
     )
-    same = {"model.lr": {"type": "float"}, "graph.viscosity_on_solve": {"type": "categorical"}}
+    same = {"model.optimizer.lr": {"type": "float"}, "graph.viscosity_on_solve": {"type": "categorical"}}
     check_study_space(study, same)  # the space its trials searched: resumed
     with pytest.raises(InputError, match="tune.study_name='physics_solve_phi076'.*graph.viscosity_on_solve"):
-        check_study_space(study, {"model.lr": {"type": "float"}})
+        check_study_space(study, {"model.optimizer.lr": {"type": "float"}})
 
 
 def test_a_failing_trial_does_not_stop_the_study_and_the_best_is_written_then_resumed(tmp_path):
@@ -241,7 +245,7 @@ def test_a_failing_trial_does_not_stop_the_study_and_the_best_is_written_then_re
             values = {name: suggest(trial, name, spec) for name, spec in space.items()}
             if trial.number == 1:
                 raise FloatingPointError("forced failure (e.g. NaN loss)")
-            return float(values["model.lr"])
+            return float(values["model.optimizer.lr"])
 
         study = run_study(cfg, tmp_path / "trials", objective=objective)
         states = [t.state for t in study.trials]
@@ -252,9 +256,11 @@ def test_a_failing_trial_does_not_stop_the_study_and_the_best_is_written_then_re
         ]
         best = OmegaConf.load(tmp_path / "experiment" / f"{cfg.tune.study_name}_best.yaml")
         lowest = min(
-            t.params["model.lr"] for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE
+            t.params["model.optimizer.lr"]
+            for t in study.trials
+            if t.state == optuna.trial.TrialState.COMPLETE
         )
-        assert best.model.lr == pytest.approx(lowest)
+        assert best.model.optimizer.lr == pytest.approx(lowest)
 
         more = compose(config_name="tune", overrides=[*overrides[:-1], "tune.n_trials=4"])
         resumed = run_study(more, tmp_path / "trials", objective=objective)

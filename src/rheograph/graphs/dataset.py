@@ -258,6 +258,9 @@ def snapshot_graphs(
     # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
     positions, offsets = snaps.positions, snaps.le_offset
+    # the strain each snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
+    # that arrested within the step budget, which predictions flag
+    relaxed = np.full(len(snaps), np.nan)
     if settings.relax_strain:
         if "disp_max" not in solve_params:
             raise InputError(
@@ -266,7 +269,7 @@ def snapshot_graphs(
             )
         positions, offsets = positions.copy(), offsets.copy()
         for idx in keep:
-            positions[idx], offsets[idx] = relax_positions(
+            positions[idx], offsets[idx], relaxed[idx] = relax_positions(
                 positions[idx], radii, lx, ly, offsets[idx], solve_params, settings.relax_strain
             )
     return [
@@ -282,6 +285,7 @@ def snapshot_graphs(
             jammed=bool(snaps.jammed[idx]),
             strain=float(snaps.strain[idx]),
             run_id=run_id,
+            relaxed_strain=float(relaxed[idx]),
         )
         for k, idx in enumerate(keep)
     ]
@@ -299,6 +303,7 @@ def snapshot_graph(
     jammed: bool = False,
     strain: float = np.nan,
     run_id: int = 0,
+    relaxed_strain: float = np.nan,
 ) -> Data:
     """The graph of one snapshot: positions (N, 2) [a], radii (N,) [a], box = (lx, ly, le_offset) [a];
     ``params`` the run's parameter mapping (imposed ``stress`` included; with ``disp_max`` the one-solve
@@ -344,6 +349,7 @@ def snapshot_graph(
         phi=torch.tensor([conditions["phi"]], dtype=torch.float64),
         stress=torch.tensor([stress], dtype=torch.float64),
         strain=torch.tensor([strain], dtype=torch.float64),
+        relaxed_strain=torch.tensor([relaxed_strain], dtype=torch.float64),
         run_id=torch.tensor([run_id]),
     )
 
@@ -461,8 +467,9 @@ class SnapshotGraphDataset(InMemoryDataset):
                 "schema": SCHEMA_VERSION,
                 # 3: jammed per snapshot (after the flow stopped), kept at any strain; 4: from the first row
                 # of the jam detector's window on (one row earlier than 3); 5: positions and box in each
-                # graph, any snapshot source; 6: positions in float64, shell and noise inputs
-                "version": 6,
+                # graph, any snapshot source; 6: positions in float64, shell and noise inputs; 7: the
+                # strain each snapshot was relaxed by
+                "version": 7,
             },
             sort_keys=True,
             default=list,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import inspect
 import logging
 import math
 
@@ -17,7 +19,58 @@ from rheograph.learn.model import ResGCN
 log = logging.getLogger("rheograph")
 
 TARGET_NAMES = ("eta", "pressure", "z_mu")
-LR_SCHEDULES = ("constant", "cosine")
+
+
+def warmup_cosine(
+    optimizer: torch.optim.Optimizer, max_epochs: int, warmup_epochs: int = 0
+) -> torch.optim.lr_scheduler.LRScheduler:
+    """Per-epoch learning-rate factor: a linear warm-up (epoch e < w: (e + 1) / (w + 1)), then a cosine
+    decay to 0 at ``max_epochs`` (0.5 (1 + cos(pi (e - w) / (max_epochs - w)))), from torch's schedulers.
+    Why: a fixed epoch budget replaces most of early stopping's patience (fewer epochs, same accuracy).
+    ``warmup_epochs`` is capped at ``max_epochs - 1`` so that the decay always has an epoch."""
+    if warmup_epochs < 0:
+        raise InputError(f"model.scheduler.warmup_epochs={warmup_epochs} is invalid: allowed >= 0")
+    total = max(1, int(max_epochs))
+    warmup = min(int(warmup_epochs), total - 1)
+    cosine = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=max(1, total - warmup))
+    if warmup == 0:
+        return cosine
+    ramp = torch.optim.lr_scheduler.LinearLR(
+        optimizer, start_factor=1.0 / (warmup + 1), end_factor=1.0, total_iters=warmup
+    )
+    return torch.optim.lr_scheduler.SequentialLR(optimizer, [ramp, cosine], milestones=[warmup])
+
+
+def _describe(factory) -> str:
+    """``torch.optim.Adam(lr=0.005, ...)`` for a partial, for messages."""
+    if isinstance(factory, functools.partial):
+        kwargs = ", ".join(f"{k}={v!r}" for k, v in factory.keywords.items())
+        return f"{factory.func.__module__}.{factory.func.__qualname__}({kwargs})"
+    return repr(factory)
+
+
+def check_training_factories(optimizer, scheduler) -> None:
+    """Build the optimiser (and the schedule) once on a dummy parameter, so that a bad setting (a NaN or
+    negative learning rate, an unknown keyword) is refused by name before any graph is built."""
+    try:
+        built = optimizer([nn.Parameter(torch.zeros(1))])
+    except (ValueError, TypeError) as err:
+        raise InputError(f"model.optimizer={_describe(optimizer)} is invalid: {err}") from None
+    if any(isinstance(v, float) and not math.isfinite(v) for v in built.defaults.values()):
+        raise InputError(f"model.optimizer={_describe(optimizer)} is invalid: a value is not finite")
+    if scheduler is not None:
+        try:
+            scheduler(built, max_epochs=2)
+        except (ValueError, TypeError) as err:
+            raise InputError(f"model.scheduler={_describe(scheduler)} is invalid: {err}") from None
+
+
+def network_hparams(hparams: dict) -> dict:
+    """The keys of ``hparams`` that ``SurrogateModule`` takes: bundles of older versions also hold
+    their optimiser settings, which a trained network does not need (as Lightning's
+    ``load_from_checkpoint`` drops keys the constructor does not take)."""
+    accepted = inspect.signature(SurrogateModule.__init__).parameters
+    return {k: v for k, v in hparams.items() if k in accepted}
 
 
 def physical_targets(y_transformed: np.ndarray, viscosity_scale: float, pressure_scale: float) -> np.ndarray:
@@ -253,7 +306,9 @@ class EpochLog(L.pytorch.callbacks.Callback):
 
 class SurrogateModule(L.LightningModule):
     """ResGCN + weighted Huber loss (``huber_beta``) over standardised targets (η_r masked on jammed
-    snapshots), Adam.
+    snapshots), trained with the optimiser and learning-rate schedule given as partials (``optimizer``:
+    params -> torch optimiser; ``scheduler``: (optimiser, max_epochs=) -> torch scheduler, stepped per
+    epoch, or None for a constant rate), as Hydra's ``model.optimizer`` / ``model.scheduler``.
 
     ``target_mean``/``target_std`` (fitted on the training fold) and the transform scales are buffers /
     hyperparameters, so a checkpoint alone maps graphs to physical eta_r, Pi, Z_mu.
@@ -292,12 +347,10 @@ class SurrogateModule(L.LightningModule):
         edge_readout: bool = False,
         norm: str = "batch",
         global_mixing: str = "none",
-        lr: float = 5e-3,
-        weight_decay: float = 0.0,
+        optimizer=None,
+        scheduler=None,
         loss_weights=(1.0, 1.0, 1.0),
         huber_beta: float = 1.0,
-        lr_schedule: str = "constant",
-        warmup_epochs: int = 0,
         viscosity_scale: float = 1.0,
         pressure_scale: float = 0.1,
         pressure_per_stress: bool = False,
@@ -308,17 +361,15 @@ class SurrogateModule(L.LightningModule):
         state_mean_by_stress: bool = True,
     ):
         super().__init__()
-        self.save_hyperparameters()
-        if not (math.isfinite(lr) and lr > 0):
-            raise InputError(f"model.lr={lr} is invalid: allowed a finite value > 0")
-        if not (math.isfinite(weight_decay) and weight_decay >= 0):
-            raise InputError(f"model.weight_decay={weight_decay} is invalid: allowed >= 0")
+        # the optimiser and schedule are how a network is trained, not what it is: a checkpoint rebuilds
+        # the network without them (they stay in the run's Hydra config)
+        self.save_hyperparameters(ignore=["optimizer", "scheduler"])
+        self.optimizer_factory = optimizer
+        self.scheduler_factory = scheduler
+        if optimizer is not None:
+            check_training_factories(optimizer, scheduler)
         if not (math.isfinite(huber_beta) and huber_beta >= 0):
             raise InputError(f"model.huber_beta={huber_beta} is invalid: allowed >= 0 (0: L1)")
-        if lr_schedule not in LR_SCHEDULES:
-            raise InputError(f"model.lr_schedule={lr_schedule!r} is invalid: allowed {LR_SCHEDULES}")
-        if warmup_epochs < 0:
-            raise InputError(f"model.warmup_epochs={warmup_epochs} is invalid: allowed >= 0")
         if len(loss_weights) != 3 or min(loss_weights) < 0:
             raise InputError(f"model.loss_weights={list(loss_weights)}: three weights >= 0")
         self.net = ResGCN(
@@ -442,7 +493,7 @@ class SurrogateModule(L.LightningModule):
         loss = (per_target * self.loss_weights).sum()
         if not torch.isfinite(loss):
             raise FloatingPointError(
-                f"{stage} loss is {loss.item()} (diverged): lower model.lr or check the inputs"
+                f"{stage} loss is {loss.item()} (diverged): lower model.optimizer.lr or check the inputs"
             )
         size = batch.num_graphs
         self.log(
@@ -510,20 +561,13 @@ class SurrogateModule(L.LightningModule):
         self._epoch_metrics("test")
 
     def configure_optimizers(self):
-        optimizer = torch.optim.Adam(
-            self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
-        )
-        if self.hparams.lr_schedule == "constant":
+        if self.optimizer_factory is None:
+            raise InputError(
+                "model.optimizer is not set: a module rebuilt from a checkpoint predicts; to train it, "
+                "pass optimizer=functools.partial(torch.optim.Adam, lr=...)"
+            )
+        optimizer = self.optimizer_factory(self.parameters())
+        if self.scheduler_factory is None:
             return optimizer
-        # cosine: a fixed epoch budget replaces most of early stopping's patience (fewer epochs, same
-        # accuracy)
-        total = max(1, int(self.trainer.max_epochs))
-        warmup = min(int(self.hparams.warmup_epochs), total - 1)
-
-        def factor(epoch: int) -> float:
-            if epoch < warmup:
-                return (epoch + 1) / (warmup + 1)
-            return 0.5 * (1.0 + np.cos(np.pi * (epoch - warmup) / max(1, total - warmup)))
-
-        scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
+        scheduler = self.scheduler_factory(optimizer, max_epochs=int(self.trainer.max_epochs))
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}

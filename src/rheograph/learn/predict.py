@@ -48,7 +48,7 @@ from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_gra
 from rheograph.io.snapshots import PHYSICAL_PARAMS, Snapshots, read_snapshots, snapshots_from_values
 from rheograph.learn.error_model import predicted_error, read_error_model
 from rheograph.learn.jamming import jammed_fraction
-from rheograph.learn.module import TARGET_NAMES, SurrogateModule
+from rheograph.learn.module import TARGET_NAMES, SurrogateModule, network_hparams
 from rheograph.learn.registry import list_models, model_paths, read_card
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 
@@ -70,7 +70,7 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
             f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
             "retrained"
         )
-    module = SurrogateModule(**bundle["hparams"])
+    module = SurrogateModule(**network_hparams(bundle["hparams"]))
     module.load_state_dict(bundle["state_dict"])
     module.eval()
     graph = dict(bundle["graph"])
@@ -130,7 +130,9 @@ def noise_reason(domain: dict, noise: float, alternatives=()) -> str:
     return ""
 
 
-def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tuple[np.ndarray, list[str]]:
+def domain_report(
+    domain: dict, snaps: Snapshots, graphs, settings: GraphSettings
+) -> tuple[np.ndarray, list[str]]:
     """Per-snapshot in-domain flags (S,) and the reasons for any snapshot outside."""
     reasons = []
     for key, value in (("phi", snaps.phi), ("stress", snaps.stress)):
@@ -149,6 +151,19 @@ def domain_report(domain: dict, snaps: Snapshots, graphs, edge_features) -> tupl
         reason = noise_reason(domain, noise, models_for_noise(snaps.phi, snaps.n_particles, noise))
         reasons.append(reason)
     flags = np.full(len(graphs), not reasons)
+    if settings.relax_strain:
+        # an arrested packing creeps: its relaxation ran out of steps before the strain the model's
+        # inputs were trained on, so they read a partly repaired configuration
+        reached = np.array([float(getattr(g, "relaxed_strain", np.nan)) for g in graphs])
+        short = reached < settings.relax_strain * (1.0 - 1e-9)
+        if short.any():
+            flags[short] = False
+            reasons.append(
+                f"relaxation reached {np.nanmin(reached):.2g} of its {settings.relax_strain:g} strain within "
+                f"its step budget in {int(short.sum())} snapshot(s) (an arrested or creeping packing): "
+                "their inputs read a partly repaired configuration"
+            )
+    edge_features = settings.edge_features
     low, high = np.array(domain["edge_min"]), np.array(domain["edge_max"])
     span = np.maximum(high - low, 1e-12)
     outside = set()
@@ -260,7 +275,7 @@ class Surrogate:
             extra["mu_eff_pred"] = (1.0 / per_stress).mean(axis=0)  # sigma / Pi, the bulk friction
             preds[:, :, 1] = per_stress * snaps.stress  # NaN where sigma is unknown
             meta["stress"] = np.full(len(graphs), snaps.stress)
-        in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings.edge_features)
+        in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings)
         if notes:
             in_domain[:] = False
         reasons = notes + reasons

@@ -22,7 +22,14 @@ from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
-from rheograph.learn.module import TARGET_NAMES, EpochLog, FoldResumePoint, fold_metrics, physical_targets
+from rheograph.learn.module import (
+    TARGET_NAMES,
+    EpochLog,
+    FoldResumePoint,
+    check_training_factories,
+    fold_metrics,
+    physical_targets,
+)
 from rheograph.naming import state_point_key
 
 log = logging.getLogger("rheograph.train")
@@ -275,7 +282,9 @@ def folds_to_train(cfg: DictConfig) -> list[int]:
 def check_run_settings(cfg: DictConfig) -> None:
     """How a run trains, refused by name before any work: an epoch budget of at least one (the cosine
     schedule spans it: Lightning's -1 for "unlimited" would make it oscillate), threads >= 1 or null
-    (null: the cores this process may use, at most 2), fold processes >= 1."""
+    (null: the cores this process may use, at most 2), fold processes >= 1, an optimiser and schedule
+    that torch accepts."""
+    check_training_factories(instantiate(cfg.model.optimizer), instantiate(cfg.model.get("scheduler")))
     epochs = cfg.trainer.get("max_epochs")
     if not isinstance(epochs, int) or epochs < 1:
         raise InputError(f"trainer.max_epochs={epochs} is invalid: allowed an integer >= 1")
@@ -472,10 +481,18 @@ def _stack_predictions(predictions) -> dict:
 
 
 def _flat_hparams(cfg: DictConfig) -> dict:
+    """``model.optimizer.lr``-style keys of the model, graph and data settings (TensorBoard's hparams)."""
     flat = {}
-    for group in ("model", "graph", "data"):
-        for key, value in OmegaConf.to_container(cfg[group], resolve=True).items():
+
+    def walk(prefix: str, node) -> None:
+        for key, value in node.items():
             if key.startswith("_"):
                 continue
-            flat[f"{group}.{key}"] = value if isinstance(value, int | float | str | bool) else str(value)
+            if isinstance(value, dict):
+                walk(f"{prefix}.{key}", value)
+            else:
+                flat[f"{prefix}.{key}"] = value if isinstance(value, int | float | str | bool) else str(value)
+
+    for group in ("model", "graph", "data"):
+        walk(group, OmegaConf.to_container(cfg[group], resolve=True))
     return flat
