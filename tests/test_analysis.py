@@ -161,6 +161,27 @@ def test_jammed_state_points_report_the_static_packing_not_a_viscosity():
     assert 2.5 < point["z_mu"] < 3.0
 
 
+def test_a_seed_held_by_two_sweeps_counts_once_with_its_longer_run(tmp_path):
+    """The same start in two sweeps (a longer rerun) repeats one trajectory: pooling both would halve
+    the error bar for nothing.  The longer run stands for the seed."""
+    import shutil
+
+    from rheograph.flowcurve import collect
+    from rheograph.io.hdf5 import read_run_info
+
+    run = "N400_phi0.76_s10_seed1_d0.002_implicit"
+    source = DATA.parents[1] / "paper" / "multirun" / run / "trajectory.h5"
+    assert read_run_info(source)["status"] == "completed"
+    for sweep in ("a", "b"):
+        (tmp_path / sweep).mkdir()
+        shutil.copy(source, tmp_path / sweep / "trajectory.h5")
+    (alone,) = collect([tmp_path / "a"])
+    (both,) = collect([tmp_path / "a", tmp_path / "b"])
+    assert both["n_runs"] == both["n_seeds"] == 1
+    for key in ("viscosity", "viscosity_se", "pressure", "z_mu"):
+        assert both[key] == alone[key]
+
+
 def test_decorrelation_strain_of_an_ar1_process_matches_its_closed_form():
     """AR(1) x_{k+1} = rho x_k + noise has autocorrelation rho^k: it crosses 1/e at lag -1/ln(rho)."""
     from rheograph.analysis import decorrelation_strain

@@ -40,8 +40,11 @@ def _is_trajectory(path: Path) -> bool:
 
 
 def collect(directories) -> list[dict]:
-    """One entry per state point (n, phi, stress, disp_max, integrator[-lagged]), seeds pooled."""
-    groups = defaultdict(list)
+    """One entry per state point (n, phi, stress, mu, disp_max, integrator[-lagged]), seeds pooled.
+
+    A seed counts once: where several files hold the same start (a longer rerun of it, in another
+    sweep), the one with the most strain stands for it, since the others repeat its trajectory."""
+    groups = defaultdict(dict)
     for directory in directories:
         for path in sorted(Path(directory).rglob("*.h5")):
             if not _is_trajectory(path):
@@ -61,15 +64,19 @@ def collect(directories) -> list[dict]:
             )
             # LF_DEM's lagged step control is another discretisation: never pooled with the default
             scheme = scheme_name(p["integrator"], p.get("lagged_step_control", False))
-            key = (p["n_particles"], p["phi"], p["stress"], p["disp_max"], scheme)
-            groups[key].append(info)
+            key = (p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme)
+            same_start = groups[key].get(p["seed"])
+            if same_start is None or info["strain"] > same_start["strain"]:
+                groups[key][p["seed"]] = info
     points = []
-    for (n, phi, stress, disp, integrator), infos in sorted(groups.items()):
+    for (n, phi, stress, mu, disp, integrator), by_seed in sorted(groups.items()):
+        infos = list(by_seed.values())
         point = dict(
             n_particles=n,
             phi=phi,
             stress=stress,
             disp_max=disp,
+            mu=mu,
             integrator=integrator,
             statuses=sorted({i["status"] for i in infos}),
             strain=float(np.mean([i["strain"] for i in infos])),
@@ -81,6 +88,7 @@ def collect(directories) -> list[dict]:
         ]
         jammed = [i for i in infos if i["status"] == "jammed"]
         point["jammed"] = bool(jammed)
+        point["n_runs"], point["n_jammed"] = len(infos), len(jammed)
         # a state point with no flowing seed is described by its jammed runs: their pressure and
         # coordination are finite (the static packing under load), their viscosity is not reported
         source = flowing or jammed

@@ -1,0 +1,104 @@
+"""Finite-size effects: the steady η_r, Π and Z_μ of the same state points at N = 400 … 20 000, and how
+often a run arrests (shear-jams) at each N.
+
+    python bench/finite_size.py data/paper/multirun data/large_n/multirun
+
+Every state point (φ, μ, σ/σ0, disp_max, scheme) simulated at two or more N is a row per N: seeds pooled as
+in the flow curves (mean; error the larger of the spread of seeds / sqrt(n) and the propagated block
+standard errors of the strain window ≥ each run's steady_state_strain), a seed counted once where
+several sweeps hold it (the longest run).  Arrested runs are counted, never averaged into η_r.  Results
+replace the marked section of docs/jamming.md unless ``--no-write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from simulate_speed import publish  # noqa: E402
+
+
+def fmt(value: float, se: float) -> str:
+    if not np.isfinite(value):
+        return "—"
+    digits = max(0, 2 - int(np.floor(np.log10(abs(se))))) if np.isfinite(se) and se > 0 else 3
+    digits = min(digits, 4)
+    return f"{value:.{digits}f} ± {se:.{digits}f}" if np.isfinite(se) else f"{value:.{digits}f}"
+
+
+def table(points) -> list[str]:
+    by_state = defaultdict(list)
+    for p in points:
+        by_state[(p["phi"], p["mu"], p["stress"], p["disp_max"], p["integrator"])].append(p)
+    lines = [
+        "| φ | μ | σ/σ0 | scheme | disp_max | N | runs (arrested) | strain | η_r | Π/σ0 | Z_μ |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (phi, mu, stress, disp, scheme), members in sorted(by_state.items()):
+        if len({p["n_particles"] for p in members}) < 2:
+            continue
+        for p in sorted(members, key=lambda q: q["n_particles"]):
+            lines.append(
+                f"| {phi:g} | {mu:g} | {stress:g} | {scheme} | {disp:g} | {p['n_particles']} | "
+                f"{p['n_runs']} ({p['n_jammed']}) | "
+                f"{p['strain']:.2f} | {fmt(p['viscosity'], p['viscosity_se'])} | "
+                f"{fmt(p['pressure'], p['pressure_se'])} | {fmt(p['z_mu'], p['z_mu_se'])} |"
+            )
+    return lines
+
+
+def arrest_table(points, phi: float) -> list[str]:
+    """Share of runs that arrested at each (σ, N) at one φ."""
+    rows = [p for p in points if np.isclose(p["phi"], phi) and p["mu"] > 0]
+    sizes = sorted({p["n_particles"] for p in rows})
+    stresses = sorted({p["stress"] for p in rows})
+    cells = {(p["stress"], p["n_particles"]): p for p in rows}
+    lines = [
+        "| σ/σ0 | " + " | ".join(f"N = {n}" for n in sizes) + " |",
+        "|---|" + "---|" * len(sizes),
+    ]
+    for s in stresses:
+        out = []
+        for n in sizes:
+            p = cells.get((s, n))
+            out.append(f"{p['n_jammed']}/{p['n_runs']}" if p else "")
+        lines.append(f"| {s:g} | " + " | ".join(out) + " |")
+    return lines
+
+
+def main(argv=None) -> int:
+    from rheograph.flowcurve import collect
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("directories", nargs="+", help="directories of trajectory files (searched recursively)")
+    ap.add_argument("--arrest-phi", type=float, default=0.80, help="φ of the arrest table")
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args(argv)
+    points = collect(args.directories)
+    lines = [
+        "Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at several "
+        "N; mean ± error over seeds and strain blocks; arrested runs counted, not averaged into η_r "
+        "(— where every run arrested).",
+        "",
+        *table(points),
+        "",
+        f"Arrested runs / runs at φ = {args.arrest_phi:g} (every stress and N simulated there):",
+        "",
+        *arrest_table(points, args.arrest_phi),
+    ]
+    command = "python bench/finite_size.py " + shlex.join(
+        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
+    )
+    lines += ["", f"Command: `{command}`"]
+    publish("finite_size", "\n".join(lines), not args.no_write, page="jamming.md")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
