@@ -28,11 +28,12 @@ from simulate_speed import publish  # noqa: E402
 
 
 def run_cost(path: Path) -> dict | None:
-    from rheograph.io.hdf5 import read_run_info
+    from rheograph.io.hdf5 import read_run_info, readable_path
 
-    info = read_run_info(path)
+    readable = readable_path(path)  # a run still going: its last checkpoint's copy
+    info = read_run_info(readable)
     params, summary = info["params"], info.get("summary") or {}
-    with h5py.File(path, "r") as h5:
+    with h5py.File(readable, "r") as h5:
         counters = json.loads(h5["checkpoint"].attrs["counters"])
     # a finished run's summary, or a running one's last checkpoint
     cpu = float(summary.get("cpu_seconds", counters.get("cpu_seconds", np.nan)))
@@ -54,13 +55,13 @@ def run_cost(path: Path) -> dict | None:
 def factor_fill(path: Path) -> tuple[float, float]:
     """(nnz(L) / nnz(tril A), nnz(L) per degree of freedom) of the factor of one step from the run's
     last checkpoint (CHOLMOD; NaN with another backend)."""
-    from rheograph.io.hdf5 import read_checkpoint
+    from rheograph.io.hdf5 import read_checkpoint, readable_path
     from rheograph.sim.integrator import Simulation
     from rheograph.sim.solver import CholmodSolver, cholmod_available
 
     if not cholmod_available():
         return np.nan, np.nan
-    params, state = read_checkpoint(path)
+    params, state = read_checkpoint(readable_path(path))
     sim = Simulation(params, state, solver="cholmod")
     sim.step()
     solver = sim.solver

@@ -14,8 +14,8 @@ positions after a shear of Δγ under the simulator's own dynamics at the impose
 (``rheograph.graphs.features.relax_positions``: the false overlaps pushed apart, the load-bearing ones
 closed again), on every ``--relax-every``-th test snapshot (about 0.4 s each at N = 400).
 
-One noise draw per (ε, snapshot), seeded (``--seed``).  Results replace the marked section of
-docs/benchmarks.md unless ``--no-write``.
+One noise draw per (ε, snapshot), seeded (``--seed``).  Results replace the marked section
+(``--section``) of docs/benchmarks.md unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -193,6 +193,7 @@ def main(argv=None) -> int:
     ap.add_argument("--relax-strain", type=float, default=0.0, help="also score relaxed positions (0: no)")
     ap.add_argument("--relax-every", type=int, default=4, help="relax every n-th test snapshot")
     ap.add_argument("--workers", type=int, default=1, help="folds scored in parallel processes")
+    ap.add_argument("--section", default="snapshot_noise", help="the marked section of docs/benchmarks.md")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     lines = [
@@ -249,7 +250,7 @@ def main(argv=None) -> int:
         [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
     )
     lines.append(f"Command: `{command}`")
-    publish("snapshot_noise", "\n".join(lines), not args.no_write)
+    publish(args.section, "\n".join(lines), not args.no_write)
     return 0
 
 

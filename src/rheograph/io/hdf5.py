@@ -117,6 +117,20 @@ def last_checkpoint_copy(path: str | Path) -> Path:
     return path.with_name(path.name + ".last-checkpoint")
 
 
+def readable_path(path: str | Path) -> Path:
+    """``path``, or, while a simulation holds its HDF5 lock, its copy as of the last checkpoint (consistent
+    on disk: written right after a flush).  Other failures to open it raise OSError."""
+    path = Path(path)
+    try:
+        with h5py.File(path, "r"):
+            return path
+    except OSError as exc:
+        copy = last_checkpoint_copy(path)
+        if "lock" in str(exc).lower() and copy.exists():
+            return copy
+        raise
+
+
 def _unused_name(path: Path) -> Path:
     """``path``, or ``path.1``, ``path.2``, ...: the first that does not exist."""
     candidate, n = path, 0

@@ -131,14 +131,12 @@ def _size_ratio(radii) -> float:
 def _open_trajectory(path: Path) -> tuple[h5py.File, Path]:
     """The file, or where a simulation still holds it (HDF5 file lock), its copy as of the last
     checkpoint (consistent on disk: written right after a flush)."""
-    from rheograph.io.hdf5 import last_checkpoint_copy
+    from rheograph.io.hdf5 import readable_path
 
     try:
-        return h5py.File(path, "r"), path
+        readable = readable_path(path)
+        return h5py.File(readable, "r"), readable
     except OSError as exc:
-        copy = last_checkpoint_copy(path)
-        if "lock" in str(exc).lower() and copy.exists():
-            return h5py.File(copy, "r"), copy
         raise InputError(
             f"{path}: cannot be opened as HDF5 ({exc}); if it is truncated or corrupt, move it aside and "
             "rerun that state point"
