@@ -292,6 +292,28 @@ def test_shipped_imaging_model_serves_noisy_snapshots_and_the_exact_one_points_t
     assert 0.5 < imaging["eta_pred"][0] / snaps.targets[-1, 0] < 2.0
 
 
+def test_undeclared_position_noise_is_flagged_by_its_overlaps_and_names_the_imaging_model():
+    """A snapshot that does not state its precision reads as exact; noise of 0.003 a makes overlaps
+    beyond any the simulator produced at that stress (the exact model is then off by a factor 10-40),
+    and the flag says why and which model serves measured positions."""
+    import rheograph
+
+    path = ROOT_DATA / "N400_phi0.76_s10_seed2_d0.002_implicit" / "trajectory.h5"
+    snaps = read_snapshots(path)
+    rng = np.random.default_rng(0)
+    values = dict(
+        positions=snaps.positions[-1] + rng.normal(0.0, 0.003, snaps.positions[-1].shape),
+        radii=snaps.radii, box=(snaps.lx, snaps.ly), le_offset=snaps.le_offset[-1], stress=snaps.stress,
+        phi=snaps.phi, mu=0.5, kn_coefficient=2e4, kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5,
+    )  # fmt: skip
+    table = rheograph.load_model("N400_phi0.76").predict(**values)
+    assert table["in_domain"][0] == 0
+    assert "'overlap'" in table["notes"][0] and "use N400_phi0.76_imaging" in table["notes"][0]
+    # the exact snapshot itself is not flagged
+    values["positions"] = snaps.positions[-1]
+    assert rheograph.load_model("N400_phi0.76").predict(**values)["in_domain"][0] == 1
+
+
 def test_a_snapshot_whose_relaxation_runs_out_of_steps_is_flagged(monkeypatch):
     """An arrested packing creeps (phi = 0.80, sigma/sigma0 = 200 at N = 400: ~2000 steps for 0.01
     strain against 50-90 for a flowing one; one that does not move would never get there): relaxation

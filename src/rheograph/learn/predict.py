@@ -57,6 +57,9 @@ from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 # the 2.2e-5 a RMS rounding of LF_DEM's 6-digit par files at N = 400, on which the exact model still
 # scores R2 log eta_r 0.989 (docs/benchmarks.md, "A shipped model on LF_DEM snapshots").
 EXACT_POSITION_PRECISION = 3e-5
+# the precision of particle tracking in a microscope [a]: which imaging models an exact model's flag names
+# when a snapshot's overlaps betray imprecise positions that it did not declare
+TRACKING_PRECISION = 0.01
 
 
 def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]:
@@ -174,7 +177,17 @@ def domain_report(
             flags[k] = False
             outside.update(np.asarray(edge_features)[bad].tolist())
     if outside:
-        reasons.append(f"edge features {sorted(outside)} beyond their trained range in some snapshots")
+        reason = f"edge features {sorted(outside)} beyond their trained range in some snapshots"
+        if "overlap" in outside and trained_noise(domain)[1] == 0.0:
+            # an exact model's overlaps are the simulator's at the imposed stress (~1e-3 a); larger ones
+            # are what undeclared position noise of ~1e-3 a and more makes
+            imaging = models_for_noise(snaps.phi, snaps.n_particles, TRACKING_PRECISION)
+            reason += (
+                "; overlaps beyond the simulator's are what imprecise positions make: if the positions are "
+                "measured, state their precision (position_noise) and use "
+                + (" or ".join(imaging) if imaging else "an imaging model (predict.py --list-models)")
+            )
+        reasons.append(reason)
     return flags, reasons
 
 
