@@ -3,11 +3,11 @@ often a run arrests (shear-jams) at each N.
 
     python bench/finite_size.py data/paper/multirun data/large_n/multirun
 
-Every state point (φ, μ, σ/σ0, disp_max, scheme) simulated at two or more N is a row per N: seeds pooled as
-in the flow curves (mean; error the larger of the spread of seeds / sqrt(n) and the propagated block
-standard errors of the strain window ≥ each run's steady_state_strain), a seed counted once where
-several sweeps hold it (the longest run).  Arrested runs are counted, never averaged into η_r.  Results
-replace the marked section of docs/jamming.md unless ``--no-write``.
+Every state point (φ, μ, σ/σ0, disp_max, scheme) simulated at ``--min-sizes`` or more N is a row per
+N: seeds pooled as in the flow curves (mean; error the larger of the spread of seeds / sqrt(n) and the
+propagated block standard errors of the strain window ≥ each run's steady_state_strain), a seed counted
+once where several sweeps hold it (the longest run).  Arrested runs are counted, never averaged into
+η_r.  Results replace the marked section of docs/jamming.md unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ def fmt(value: float, se: float) -> str:
     return f"{value:.{digits}f} ± {se:.{digits}f}" if np.isfinite(se) else f"{value:.{digits}f}"
 
 
-def table(points) -> list[str]:
+def table(points, min_sizes: int) -> list[str]:
     by_state = defaultdict(list)
     for p in points:
         by_state[(p["phi"], p["mu"], p["stress"], p["disp_max"], p["integrator"])].append(p)
@@ -41,7 +41,7 @@ def table(points) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (phi, mu, stress, disp, scheme), members in sorted(by_state.items()):
-        if len({p["n_particles"] for p in members}) < 2:
+        if len({p["n_particles"] for p in members}) < min_sizes:
             continue
         for p in sorted(members, key=lambda q: q["n_particles"]):
             lines.append(
@@ -77,16 +77,17 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("directories", nargs="+", help="directories of trajectory files (searched recursively)")
+    ap.add_argument("--min-sizes", type=int, default=3, help="state points simulated at this many N or more")
     ap.add_argument("--arrest-phi", type=float, default=0.80, help="φ of the arrest table")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     points = collect(args.directories)
     lines = [
-        "Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at several "
-        "N; mean ± error over seeds and strain blocks; arrested runs counted, not averaged into η_r "
-        "(— where every run arrested).",
+        f"Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at "
+        f"{args.min_sizes} or more N; mean ± error over seeds and strain blocks; arrested runs counted, "
+        "not averaged into η_r (— where every run arrested).",
         "",
-        *table(points),
+        *table(points, args.min_sizes),
         "",
         f"Arrested runs / runs at φ = {args.arrest_phi:g} (every stress and N simulated there):",
         "",
