@@ -43,6 +43,7 @@ def run_cost(path: Path) -> dict | None:
         "n": int(params["n_particles"]),
         "phi": float(params["phi"]),
         "stress": float(params["stress"]),
+        "disp_max": float(params["disp_max"]),
         "status": info["status"],
         "strain": strain,
         "cpu": cpu,
@@ -52,22 +53,23 @@ def run_cost(path: Path) -> dict | None:
     }
 
 
-def factor_fill(path: Path) -> tuple[float, float]:
-    """(nnz(L) / nnz(tril A), nnz(L) per degree of freedom) of the factor of one step from the run's
-    last checkpoint (CHOLMOD; NaN with another backend)."""
+def factor_fill(path: Path) -> tuple[float, float, float]:
+    """(nnz(L) / nnz(tril A), nnz(L) per degree of freedom, the factor's values in MB at 8 bytes per
+    nonzero) of the factor of one step from the run's last checkpoint (CHOLMOD; NaN with another
+    backend)."""
     from rheograph.io.hdf5 import read_checkpoint, readable_path
     from rheograph.sim.integrator import Simulation
     from rheograph.sim.solver import CholmodSolver, cholmod_available
 
     if not cholmod_available():
-        return np.nan, np.nan
+        return np.nan, np.nan, np.nan
     params, state = read_checkpoint(readable_path(path))
     sim = Simulation(params, state, solver="cholmod")
     sim.step()
     solver = sim.solver
     assert isinstance(solver, CholmodSolver)
     nnz_l = solver._factor.L().nnz
-    return nnz_l / solver._lower.nnz, nnz_l / solver._lower.shape[0]
+    return nnz_l / solver._lower.nnz, nnz_l / solver._lower.shape[0], 8e-6 * nnz_l
 
 
 def main(argv=None) -> int:
@@ -90,29 +92,31 @@ def main(argv=None) -> int:
             # start-up) are left out
             if "implicit" not in path.parent.name or row["steps"] <= 0 or not np.isfinite(row["cpu"]):
                 continue
-            row["fill"], row["nnz_per_dof"] = factor_fill(path)
+            row["fill"], row["nnz_per_dof"], row["factor_mb"] = factor_fill(path)
             rows.append(row)
     rows.sort(key=lambda r: (r["stress"], r["n"]))
-    reference = {r["stress"]: r for r in rows if r["n"] == 400}
+    reference = {(r["stress"], r["disp_max"]): r for r in rows if r["n"] == 400}
     lines = [
-        f"φ = {args.phi:g}, seed {args.seed}, implicit at disp_max 2e-3, one machine (runs of a sweep, one "
+        f"φ = {args.phi:g}, seed {args.seed}, implicit scheme, one machine (runs of a sweep, one "
         "per core, the other core busy).  µs/particle-step = CPU s / (steps × N); the ratio is to "
         "N = 400 at the same stress.  Fill: CHOLMOD (nested dissection) from one step of the run's last "
-        "checkpoint.",
+        "checkpoint; factor MB: its values at 8 bytes each.  Peak memory: the high-water mark of the "
+        "process that ran the sweep (the ~300 MB of imported libraries included; runs of one sweep share "
+        "a process).",
         "",
-        "| σ/σ0 | N | status | strain | CPU s/strain | steps/strain | µs/particle-step | ratio to N = 400 | "
-        "peak memory MB | fill nnz(L)/nnz(A) | nnz(L)/dof | file MB |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| σ/σ0 | disp_max | N | status | strain | CPU s/strain | steps/strain | µs/particle-step | "
+        "ratio to N = 400 | peak memory MB | fill nnz(L)/nnz(A) | nnz(L)/dof | factor MB | file MB |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         per = 1e6 * r["cpu"] / (r["steps"] * r["n"])
-        ref = reference.get(r["stress"])
+        ref = reference.get((r["stress"], r["disp_max"]))
         ratio = per / (1e6 * ref["cpu"] / (ref["steps"] * ref["n"])) if ref else np.nan
         lines.append(
-            f"| {r['stress']:g} | {r['n']} | {r['status']} | {r['strain']:.2f} | "
+            f"| {r['stress']:g} | {r['disp_max']:g} | {r['n']} | {r['status']} | {r['strain']:.2f} | "
             f"{r['cpu'] / r['strain']:.1f} | "
             f"{r['steps'] / r['strain']:.0f} | {per:.2f} | {ratio:.2f} | {r['peak_mb']:.0f} | "
-            f"{r['fill']:.2f} | {r['nnz_per_dof']:.1f} | {r['size_mb']:.1f} |"
+            f"{r['fill']:.2f} | {r['nnz_per_dof']:.1f} | {r['factor_mb']:.1f} | {r['size_mb']:.1f} |"
         )
     command = "python bench/large_n.py " + shlex.join(
         [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]

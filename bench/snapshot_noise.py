@@ -194,10 +194,11 @@ def main(argv=None) -> int:
     ap.add_argument("--relax-every", type=int, default=4, help="relax every n-th test snapshot")
     ap.add_argument("--workers", type=int, default=1, help="folds scored in parallel processes")
     ap.add_argument("--section", default="snapshot_noise", help="the marked section of docs/benchmarks.md")
+    ap.add_argument("--title", default="Position noise: how far the surrogates read imprecise snapshots")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     lines = [
-        "### Position noise: how far the surrogates read imprecise snapshots",
+        f"### {args.title}",
         "",
         "Held-out test trajectories of each run, Gaussian noise ε per coordinate (units of a) on their "
         "positions, each fold's model on its own test trajectories; metrics pooled over the folds' test "
