@@ -7,6 +7,7 @@ import pytest
 
 from rheograph.errors import InputError
 from rheograph.jamming_points import (
+    arrest_bracket,
     bootstrap,
     fit_divergence,
     fit_wyart_cates,
@@ -60,6 +61,26 @@ def test_branches_select_frictionless_and_plateau_runs_and_skip_jammed_ones():
     plateau, top = plateau_branch(runs, 400)
     assert top == 200.0 and [r["phi"] for r in plateau] == [0.76]  # the jammed run has no viscosity
     assert [r["phi"] for r in near(frictionless_branch(runs, 400), 0.03)] == [0.80]
+
+
+def test_arrest_bracket_lies_between_the_last_area_fraction_that_flows_and_the_first_that_arrests():
+    """Every run flows at 0.83, one of three arrests at 0.835, every one at 0.84: phi_J in [0.83, 0.84];
+    a run stopped early decides nothing, and a branch that never arrests has no bracket."""
+    branch = [
+        *(_run(400, 0.82, 1.0, s, 300.0, mu=0.0) for s in (1, 2, 3)),
+        *(_run(400, 0.83, 1.0, s, 900.0, mu=0.0) for s in (1, 2, 3)),
+        _run(400, 0.835, 1.0, 1, 2900.0, mu=0.0),
+        _run(400, 0.835, 1.0, 2, np.inf, mu=0.0, status="jammed"),
+        _run(400, 0.835, 1.0, 3, 2200.0, mu=0.0),
+        *(_run(400, 0.84, 1.0, s, np.inf, mu=0.0, status="jammed") for s in (1, 2)),
+        _run(400, 0.84, 1.0, 3, np.nan, mu=0.0, status="interrupted"),
+        _run(400, 0.845, 1.0, 1, np.inf, mu=0.0, status="jammed"),
+    ]
+    assert arrest_bracket(branch) == (0.83, 0.84, 8)
+    assert arrest_bracket([r for r in branch if r["status"] != "jammed"]) is None
+    rows = [r for r in jamming_table(branch) if r["method"].startswith("arrest bracket")]
+    assert len(rows) == 1 and rows[0]["quantity"] == "phi_J^0" and rows[0]["phi_j"] == pytest.approx(0.835)
+    assert rows[0]["phi_j_ci"] == (0.83, 0.84)
 
 
 def test_bootstrap_interval_brackets_the_true_jamming_point_of_noisy_seeds():

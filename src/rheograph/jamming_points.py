@@ -66,23 +66,47 @@ def flowing(run: dict) -> bool:
     return run["status"] == "completed" and np.isfinite(run["eta"]) and run["eta"] > 0
 
 
-def frictionless_branch(runs: list[dict], n: int) -> list[dict]:
+def frictionless_branch(runs: list[dict], n: int, flowing_only: bool = True) -> list[dict]:
+    """Runs at N on the frictionless branch: mu = 0, or sigma/sigma0 <= 0.5 with (almost) no frictional
+    contact; the flowing ones, or (``flowing_only=False``) every mu = 0 run, arrested ones included (a
+    sigma <= 0.5 run that arrested has no steady Z_mu to place it by)."""
     return [
         r
         for r in runs
         if r["n"] == n
-        and flowing(r)
+        and (flowing(r) or (not flowing_only and r["mu"] == 0.0))
         and (r["mu"] == 0.0 or (r["stress"] <= 0.5 and r["z_mu"] < FRICTIONLESS_Z_MU))
     ]
 
 
-def plateau_branch(runs: list[dict], n: int) -> tuple[list[dict], float]:
-    """Flowing frictional runs at the largest stress of the set at this N, and that stress."""
+def plateau_branch(runs: list[dict], n: int, flowing_only: bool = True) -> tuple[list[dict], float]:
+    """Frictional runs at the largest stress of the set at this N (the flowing ones, or every one), and
+    that stress."""
     frictional = [r for r in runs if r["n"] == n and r["mu"] > 0]
     if not frictional:
         return [], np.nan
     top = max(r["stress"] for r in frictional)
-    return [r for r in frictional if r["stress"] == top and flowing(r)], top
+    return [r for r in frictional if r["stress"] == top and (flowing(r) or not flowing_only)], top
+
+
+def arrest_bracket(branch: list[dict]) -> tuple[float, float, int] | None:
+    """(phi_low, phi_high, runs between them): the highest area fraction at which every finished run of
+    the branch flows, below the lowest at which every one arrested (runs stopped early count for
+    neither).  The jamming point of this box lies between them, whatever the form of the divergence;
+    None where no area fraction arrested every run."""
+    decided = [r for r in branch if r["status"] in ("completed", "jammed")]
+    by_phi: dict[float, list[str]] = {}
+    for r in decided:
+        by_phi.setdefault(r["phi"], []).append(r["status"])
+    arrested = [phi for phi, s in by_phi.items() if all(x == "jammed" for x in s)]
+    if not arrested:
+        return None
+    high = min(arrested)
+    flows = [phi for phi, s in by_phi.items() if phi < high and all(x == "completed" for x in s)]
+    if not flows:
+        return None
+    low = max(flows)
+    return low, high, sum(low <= r["phi"] <= high for r in decided)
 
 
 def fit_divergence(phi, eta, beta: float | None = None) -> dict:
@@ -180,6 +204,28 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
         ]
         plateau, top = plateau_branch(runs, n)
         branches.append(("phi_J^mu", f"high-stress plateau (sigma/sigma0 = {top:g})", plateau))
+        for name, everyone in (
+            ("phi_J^0", frictionless_branch(runs, n, flowing_only=False)),
+            ("phi_J^mu", plateau_branch(runs, n, flowing_only=False)[0]),
+        ):
+            bracket = arrest_bracket(everyone)
+            if bracket:
+                low, high, count = bracket
+                rows.append(
+                    {
+                        "n": n,
+                        "quantity": name,
+                        "method": "arrest bracket: every run flows / every run arrests",
+                        "data": next(label for q, label, _ in branches if q == name),
+                        "trajectories": count,
+                        "phi_range": (low, high),
+                        "phi_j": 0.5 * (low + high),
+                        "phi_j_ci": (low, high),
+                        "beta": np.nan,
+                        "beta_ci": None,
+                        "rms_log": np.nan,
+                    }
+                )
         for name, label, branch in branches:
             branch = near(branch, window)
             if len({r["phi"] for r in branch}) < 3:
@@ -248,18 +294,22 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
 
 def markdown(rows: list[dict], command: str) -> str:
     lines = [
-        "| N | quantity | method | data | trajectories | φ range | φ_J (68 % bootstrap) | β | rms log η_r |",
+        "| N | quantity | method | data | trajectories | φ range | φ_J (interval) | β | rms log η_r |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         low, high = r["phi_j_ci"]
-        beta = f"{r['beta']:.2f}" + (
-            f" ({r['beta_ci'][0]:.2f}–{r['beta_ci'][1]:.2f})" if r["beta_ci"] else ""
+        beta = (
+            "—"
+            if not np.isfinite(r["beta"])
+            else f"{r['beta']:.2f}"
+            + (f" ({r['beta_ci'][0]:.2f}–{r['beta_ci'][1]:.2f})" if r["beta_ci"] else "")
         )
+        rms = "—" if not np.isfinite(r["rms_log"]) else f"{r['rms_log']:.3f}"
         lines.append(
             f"| {r['n']} | {r['quantity']} | {r['method']} | {r['data']} | {r['trajectories']} | "
             f"{r['phi_range'][0]:g}–{r['phi_range'][1]:g} | {r['phi_j']:.4f} ({low:.4f}–{high:.4f}) | "
-            f"{beta} | {r['rms_log']:.3f} |"
+            f"{beta} | {rms} |"
         )
     lines += ["", f"Command: `{command}`"]
     return "\n".join(lines)
