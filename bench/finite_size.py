@@ -13,7 +13,6 @@ once where several sweeps hold it (the longest run).  Arrested runs are counted,
 from __future__ import annotations
 
 import argparse
-import shlex
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -21,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from simulate_speed import command_line, publish  # noqa: E402
 
 
 def fmt(value: float, se: float) -> str:
@@ -93,9 +92,7 @@ def main(argv=None) -> int:
         "",
         *arrest_table(points, args.arrest_phi),
     ]
-    command = "python bench/finite_size.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("finite_size.py", argv)
     lines += ["", f"Command: `{command}`"]
     publish("finite_size", "\n".join(lines), not args.no_write, page="jamming.md")
     return 0

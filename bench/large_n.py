@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 from pathlib import Path
 
@@ -24,7 +23,7 @@ import h5py
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from simulate_speed import command_line, publish  # noqa: E402
 
 
 def run_cost(path: Path) -> dict | None:
@@ -118,9 +117,7 @@ def main(argv=None) -> int:
             f"{r['steps'] / r['strain']:.0f} | {per:.2f} | {ratio:.2f} | {r['peak_mb']:.0f} | "
             f"{r['fill']:.2f} | {r['nnz_per_dof']:.1f} | {r['factor_mb']:.1f} | {r['size_mb']:.1f} |"
         )
-    command = "python bench/large_n.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("large_n.py", argv)
     lines += ["", f"Command: `{command}`"]
     publish("large_n_cost", "\n".join(lines), not args.no_write, page="jamming.md")
     return 0

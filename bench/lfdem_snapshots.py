@@ -15,7 +15,6 @@ prediction).  Results replace the marked section of docs/benchmarks.md unless ``
 from __future__ import annotations
 
 import argparse
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from simulate_speed import command_line, publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -89,9 +88,7 @@ def main(argv=None) -> int:
     model.predict_snapshots(snaps)
     cost = time.perf_counter() - t0
 
-    command = "python bench/lfdem_snapshots.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("lfdem_snapshots.py", argv)
     lines = [
         f"### A shipped model on LF_DEM snapshots ({args.model})",
         "",

@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from simulate_speed import command_line, publish  # noqa: E402
 
 from rheograph.learn.baselines import physics_fold_metrics  # noqa: E402
 
@@ -86,9 +85,7 @@ def main(argv=None) -> int:
     ]
     for run in args.runs:
         lines += run_table(Path(run), Path(args.cache_dir))
-    command = "python bench/physics_rows.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("physics_rows.py", argv)
     lines += ["", f"Command: `{command}`"]
     publish("physics_rows", "\n".join(lines), not args.no_write)
     return 0

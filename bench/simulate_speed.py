@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
+import sys
 import time
 from pathlib import Path
 
@@ -124,6 +126,13 @@ def main() -> None:
     ]
     if not args.no_write:
         write_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
+
+
+def command_line(script: str, argv=None) -> str:
+    """``python bench/<script> ARGS`` as the user typed it (``argv``, or the process's), less
+    ``--no-write``: the command that reproduces a published section."""
+    args = argv if argv is not None else sys.argv[1:]
+    return f"python bench/{script} " + shlex.join([a for a in args if a != "--no-write"])
 
 
 def publish(section: str, text: str, write: bool, page: str = "benchmarks.md") -> None:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -30,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from simulate_speed import command_line, publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
@@ -247,9 +246,7 @@ def main(argv=None) -> int:
                 cells = " | ".join(f"{scores[eps][key]:.3f}" for eps in args.noise)
                 lines.append(f"| {name} | {label} | {cells} |")
         lines.append("")
-    command = "python bench/snapshot_noise.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("snapshot_noise.py", argv)
     lines.append(f"Command: `{command}`")
     publish(args.section, "\n".join(lines), not args.no_write)
     return 0

@@ -55,7 +55,7 @@ import numpy as np
 from rheograph.io.hdf5 import POSITION_DECIMALS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import write_section  # noqa: E402
+from simulate_speed import command_line, write_section  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "vs_lfdem"
@@ -441,9 +441,7 @@ def main(argv=None) -> int:
             print(f"run directories kept in {work}")
         else:
             shutil.rmtree(work, ignore_errors=True)
-    command = "python bench/vs_lfdem.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("vs_lfdem.py", argv)
     for n in args.n:  # one section per system size, so that sizes can be measured in separate runs
         lines = [
             f"### Side by side with LF_DEM, N = {n}",

@@ -16,14 +16,13 @@ import argparse
 import contextlib
 import dataclasses
 import io
-import shlex
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from simulate_speed import command_line, publish  # noqa: E402
 
 
 def score(models, paths, min_strain: float) -> list[dict]:
@@ -102,9 +101,7 @@ def main(argv=None) -> int:
             f"{r['r2_log_eta']:.4f} | {r['r2_log_pressure']:.5f} | {r['r2_z_mu']:.5f} | "
             f"{r['fluct_eta']:.3f} |"
         )
-    command = "python bench/zero_shot_n.py " + shlex.join(
-        [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--no-write"]
-    )
+    command = command_line("zero_shot_n.py", argv)
     lines += ["", f"Command: `{command}`"]
     publish("zero_shot_n", "\n".join(lines), not args.no_write, page="jamming.md")
     return 0
