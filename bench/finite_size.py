@@ -66,7 +66,13 @@ def arrest_table(points, phi: float) -> list[str]:
         out = []
         for n in sizes:
             p = cells.get((s, n))
-            out.append(f"{p['n_jammed']}/{p['n_runs']}" if p else "")
+            if p is None:
+                out.append("")
+                continue
+            unfinished = p["n_runs"] - p["n_finished"]
+            out.append(
+                f"{p['n_jammed']}/{p['n_finished']}" + (f" (+{unfinished} unfinished)" if unfinished else "")
+            )
         lines.append(f"| {s:g} | " + " | ".join(out) + " |")
     return lines
 
@@ -88,7 +94,8 @@ def main(argv=None) -> int:
         "",
         *table(points, args.min_sizes),
         "",
-        f"Arrested runs / runs at φ = {args.arrest_phi:g} (every stress and N simulated there):",
+        f"Arrested runs / finished runs at φ = {args.arrest_phi:g} (every stress and N simulated there; a "
+        "run stopped early decides nothing yet):",
         "",
         *arrest_table(points, args.arrest_phi),
     ]

@@ -89,6 +89,7 @@ def collect(directories) -> list[dict]:
         jammed = [i for i in infos if i["status"] == "jammed"]
         point["jammed"] = bool(jammed)
         point["n_runs"], point["n_jammed"] = len(infos), len(jammed)
+        point["n_finished"] = sum(i["status"] in ("completed", "jammed") for i in infos)
         # a state point with no flowing seed is described by its jammed runs: their pressure and
         # coordination are finite (the static packing under load), their viscosity is not reported
         source = flowing or jammed
