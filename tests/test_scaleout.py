@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from rheograph.io.hdf5 import read_run_info
 from rheograph.io.index import build_index, index_files, write_index
 from rheograph.learn.datamodule import expand_files
 
@@ -40,6 +41,33 @@ def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path
     assert all(not Path(e["path"]).is_absolute() for e in json.loads(path.read_text())["runs"])
     assert index_files(path) == [str(f.resolve()) for f in files]
     assert expand_files(str(path)) == sorted(str(f.resolve()) for f in files)
+
+
+def test_a_sweep_runs_past_a_state_point_that_cannot_start_and_lists_it_at_the_end(tmp_path):
+    """phi = 0.86 has no overlap-free start for 16 particles: that point fails with its reason, the
+    sweep still runs phi = 0.5 (in another worker), then ends non-zero naming the failed point only."""
+    cmd = [
+        sys.executable,
+        str(ROOT / "simulate.py"),
+        "-m",
+        "hydra/launcher=joblib",
+        "hydra.launcher.n_jobs=2",
+        "sim=tiny",
+        "sim.n_particles=16",
+        "sim.phi=0.86,0.5",
+        "sim.strain=0.03",
+        f"output_root={tmp_path}",
+        "progress=false",
+    ]
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 1, done.stderr[-2000:]
+    tail = done.stderr.strip().splitlines()[-2:]
+    assert tail[0].startswith("simulate.py: 1 state point(s) of this sweep could not run")
+    assert "N16_phi0.86_" in tail[1] and "sim.relax_tolerance" in tail[1]
+    (finished,) = tmp_path.glob("multirun/*/trajectory.h5")
+    assert finished.parent.name.startswith("N16_phi0.5_")
+    assert read_run_info(finished)["status"] == "completed"
+    assert not (finished.parent / "failed.txt").exists()
 
 
 def test_submitit_local_launcher_runs_a_simulation(tmp_path):

@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
+import time
 from pathlib import Path
 
+from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from rheograph.naming import run_name, sim_id
@@ -20,11 +23,39 @@ def register_resolvers() -> None:
         OmegaConf.register_new_resolver("sim_id", sim_id)
 
 
+# written into the run directory of a sweep's state point that could not run (StatePointError)
+FAILURE_NOTE = "failed.txt"
+
+
+class SweepFailures(Callback):
+    """Ends a ``simulate.py -m`` sweep with the list of its state points that could not run (each has
+    ``failed.txt`` in its run directory, and its log says why) and a non-zero exit status; a sweep
+    without failures ends as before.  Works with every launcher: the notes are files, not return values."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        self.started = time.time()
+
+    def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        notes = sorted(
+            note
+            for note in Path(config.hydra.sweep.dir).glob(f"*/{FAILURE_NOTE}")
+            if note.stat().st_mtime >= self.started - 1.0  # this sweep's, not an older one's
+        )
+        if notes:
+            lines = [f"  {note.parent}: {note.read_text().strip()}" for note in notes]
+            sys.exit(
+                f"simulate.py: {len(notes)} state point(s) of this sweep could not run (the others did):\n"
+                + "\n".join(lines)
+            )
+
+
 def simulate_main(cfg: DictConfig) -> dict:
     """Run one state point from a composed ``simulate`` config; returns the run's summary (simulate.py
     has made the linear algebra single-threaded before anything loaded it)."""
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
 
+    from rheograph.errors import StatePointError
     from rheograph.runner import run_state_point
     from rheograph.sim.params import SimParams
     from rheograph.sim.solver import resolve_solver_name
@@ -41,7 +72,17 @@ def simulate_main(cfg: DictConfig) -> dict:
     run_dir = Path(HydraConfig.get().runtime.output_dir) if HydraConfig.initialized() else Path.cwd()
     path = run_dir / cfg.output_file
     log.info("state point %s -> %s", run_name(params), path)
-    outcome = run_state_point(params, path, progress=cfg.progress, solver=cfg.solver)
+    failure_note = run_dir / FAILURE_NOTE
+    failure_note.unlink(missing_ok=True)  # from an earlier sweep: this one decides afresh
+    try:
+        outcome = run_state_point(params, path, progress=cfg.progress, solver=cfg.solver)
+    except StatePointError as exc:
+        if not (HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN):
+            raise
+        # one state point of a sweep: the others still run, and SweepFailures lists this one at the end
+        log.error("%s: %s", run_name(params), exc)
+        failure_note.write_text(f"{exc}\n")
+        return {"status": "failed", "path": str(path), "reason": str(exc)}
     if outcome.already_finished:  # a rerun sweep: one line, not the summary again in every finished log
         log.info("already %s at strain %.3f: nothing to do", outcome.status, outcome.strain)
         return {"status": outcome.status, "path": str(path), **outcome.summary}

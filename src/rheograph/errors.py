@@ -23,6 +23,12 @@ class InputError(ValueError):
     """Bad input from the user (configuration, command line or file)."""
 
 
+class StatePointError(InputError):
+    """A state point that cannot be run as asked, for a reason of its own physics (no overlap-free
+    initial configuration at its area fraction): alone it ends the program like any bad input; in a
+    sweep the other state points still run and the failed ones are listed at the end."""
+
+
 class NoRoomError(InputError):
     """An HDF5 file whose writes found no room (disk full, quota, file-size limit), reported with what a
     rerun resumes from; the library may still hold the file open."""

@@ -3,7 +3,7 @@
 import numpy as np
 from numba import njit
 
-from rheograph.errors import InputError
+from rheograph.errors import StatePointError
 from rheograph.sim.geometry import minimum_image, neighbour_pairs, wrap_positions
 
 
@@ -52,7 +52,7 @@ def random_configuration(
     area fraction of 0.80), so that the configuration starts with open gaps rather than a crowd of
     marginal contacts.
 
-    Returns (positions (N, 2), radii (N,)).  Raises InputError if the overlaps cannot be relaxed
+    Returns (positions (N, 2), radii (N,)).  Raises StatePointError if the overlaps cannot be relaxed
     below ``tolerance`` (the area fraction is above random close packing).
     """
     rng = np.random.default_rng(seed)
@@ -77,7 +77,7 @@ def random_configuration(
             if _overlap_step(pos.copy(), radii, fresh[0], fresh[1], lx, ly, 0.0) < tolerance:
                 return pos, true_radii
             pairs = fresh
-    raise InputError(
+    raise StatePointError(
         f"sim.phi: could not relax the initial configuration at area fraction {phi:.4g}: max overlap "
         f"{max_overlap:.2e} > sim.relax_tolerance={tolerance:.1e} after {max_iterations} iterations "
         "(too close to jamming: lower sim.phi or raise sim.relax_tolerance)"
