@@ -3,15 +3,16 @@ larger (or smaller) systems, which they never saw by construction.
 
     python bench/zero_shot_n.py data/large_n/multirun --models N400_phi0.76 N2000_phi0.76
     python bench/zero_shot_n.py data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
-        --models N400_phi0.76_imaging --noise 0 0.01 0.03 --every 4 --page benchmarks.md --section zero_shot_n_noise
+        --models N400_phi0.76_imaging --noise 0 0.01 0.03 --every 4 \\
+        --page benchmarks.md --section zero_shot_n_noise --title '...'
 
 Every snapshot with strain >= 1 of every trajectory under the directories (grouped by N and φ), each
-model whose area fractions cover the group: its ensemble prediction (the models flag N as outside their domain: that is the point), against the
-simulator's own targets: R² of log η_r, log Π and Z_μ per (N, φ, model), pooled over the stresses, with
-the within-state fluctuation correlation of η_r.  With ``--noise`` the positions carry Gaussian noise of
-each ε (declared to the model, as for an imaging model), beside the lookup of the other seeds' mean at the
-same state point.  Results replace the marked section (``--section``) of docs/<``--page``> (default
-jamming.md) unless ``--no-write``.
+model whose area fractions cover the group: its ensemble prediction (the models flag N as outside their
+domain: that is the point), against the simulator's own targets: R² of log η_r, log Π and Z_μ per (N, φ,
+model), pooled over the stresses, with the within-state fluctuation correlation of η_r.  With ``--noise``
+the positions carry Gaussian noise of each ε (declared to the model, as for an imaging model), beside the
+lookup of the other seeds' mean at the same state point.  Results replace the marked section
+(``--section``) of docs/<``--page``> (default jamming.md) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -146,6 +147,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="of the noise draws")
     ap.add_argument("--page", default="jamming.md", help="the docs page holding the section")
     ap.add_argument("--section", default="zero_shot_n")
+    ap.add_argument("--title", default=None, help="a heading inside the section (none: the page has one)")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     if args.every < 1 or any(not 0.0 <= eps < 1.0 for eps in args.noise):
@@ -179,6 +181,8 @@ def main(argv=None) -> int:
         )
     command = command_line("zero_shot_n.py", argv)
     lines += ["", f"Command: `{command}`"]
+    if args.title:
+        lines = [f"### {args.title}", "", *lines]
     publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
     return 0
 
