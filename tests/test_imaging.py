@@ -292,6 +292,23 @@ def test_shipped_imaging_model_serves_noisy_snapshots_and_the_exact_one_points_t
     assert 0.5 < imaging["eta_pred"][0] / snaps.targets[-1, 0] < 2.0
 
 
+def test_every_shipped_imaging_model_is_the_one_named_for_tracked_positions_at_its_area_fraction():
+    """For positions known to particle-tracking precision, the models offered (in the exact models'
+    notes) at each imaging model's (φ, N) are the imaging models, and never an exact one."""
+    from rheograph.learn.predict import TRACKING_PRECISION, models_for_noise, trained_noise
+    from rheograph.learn.registry import list_models, model_paths, read_card
+
+    imaging = [name for name in list_models() if "imaging" in name]
+    assert {"N400_phi0.70_imaging", "N400_phi0.76_imaging", "N400_phi0.80_imaging"} <= set(imaging)
+    for name in imaging:
+        card = read_card(model_paths(name)[0])
+        low, high = trained_noise({"position_noise": card["position_noise"]})
+        assert low <= TRACKING_PRECISION <= high, name
+        (phi, _), n_particles = card["domain"]["phi"], card["domain"]["n_particles"][0]
+        offered = models_for_noise(phi, n_particles, TRACKING_PRECISION)
+        assert name in offered and all("imaging" in other for other in offered), (name, offered)
+
+
 def test_undeclared_position_noise_is_flagged_by_its_overlaps_and_names_the_imaging_model():
     """A snapshot that does not state its precision reads as exact; noise of 0.003 a makes overlaps
     beyond any the simulator produced at that stress (the exact model is then off by a factor 10-40),
