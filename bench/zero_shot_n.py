@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import glob
 import io
 import sys
 from pathlib import Path
@@ -139,7 +140,7 @@ def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("sources", nargs="+", help="trajectory files, or directories searched for them")
+    ap.add_argument("sources", nargs="+", help="trajectory files, globs, or directories searched for them")
     ap.add_argument("--models", nargs="+", default=["N400_phi0.76", "N2000_phi0.76"])
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument("--noise", type=float, nargs="+", default=[0.0], help="position noise ε [a], declared")
@@ -152,9 +153,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.every < 1 or any(not 0.0 <= eps < 1.0 for eps in args.noise):
         ap.error("--every must be >= 1 and each --noise in [0, 1) (units of a)")
-    paths = sorted(
-        q for s in map(Path, args.sources) for q in (s.rglob("trajectory.h5") if s.is_dir() else [s])
-    )
+    # a quoted glob is expanded here, so that the command quoted in the docs stays short
+    sources = [Path(q) for s in args.sources for q in (sorted(glob.glob(s)) if glob.has_magic(s) else [s])]
+    paths = sorted(q for s in sources for q in (s.rglob("trajectory.h5") if s.is_dir() else [s]))
+    if not paths:
+        ap.error(f"no trajectory files in {args.sources}")
     rows = score(args.models, paths, args.min_strain, args.noise, args.every, args.seed)
     thinned = f" (every {args.every}th)" if args.every > 1 else ""
     lines = [
