@@ -12,21 +12,22 @@ from rheograph.learn.datamodule import expand_files
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def simulate_sweep(tmp_path, *overrides: str) -> subprocess.CompletedProcess:
+    """``simulate.py -m sim=tiny <overrides>`` into ``tmp_path`` (no progress bar), its output captured."""
+    cmd = [sys.executable, str(ROOT / "simulate.py"), "-m", "sim=tiny", *overrides]
+    cmd += [f"output_root={tmp_path}", "progress=false"]
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+
+
 def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path):
-    cmd = [
-        sys.executable,
-        str(ROOT / "simulate.py"),
-        "-m",
+    done = simulate_sweep(
+        tmp_path,
         "hydra/launcher=joblib",
         "hydra.launcher.n_jobs=2",
-        "sim=tiny",
         "sim.stress=1,20",
         "sim.strain=0.06",
         "sim.snapshot_interval=0.02",
-        f"output_root={tmp_path}",
-        "progress=false",
-    ]
-    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "Joblib.Parallel(n_jobs=2" in done.stdout + done.stderr
     files = sorted(tmp_path.glob("multirun/*/trajectory.h5"))
@@ -46,20 +47,14 @@ def test_joblib_multirun_runs_jobs_in_parallel_and_collect_indexes_them(tmp_path
 def test_a_sweep_runs_past_a_state_point_that_cannot_start_and_lists_it_at_the_end(tmp_path):
     """phi = 0.86 has no overlap-free start for 16 particles: that point fails with its reason, the
     sweep still runs phi = 0.5 (in another worker), then ends non-zero naming the failed point only."""
-    cmd = [
-        sys.executable,
-        str(ROOT / "simulate.py"),
-        "-m",
+    done = simulate_sweep(
+        tmp_path,
         "hydra/launcher=joblib",
         "hydra.launcher.n_jobs=2",
-        "sim=tiny",
         "sim.n_particles=16",
         "sim.phi=0.86,0.5",
         "sim.strain=0.03",
-        f"output_root={tmp_path}",
-        "progress=false",
-    ]
-    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    )
     assert done.returncode == 1, done.stderr[-2000:]
     tail = done.stderr.strip().splitlines()[-2:]
     assert tail[0].startswith("simulate.py: 1 state point(s) of this sweep could not run")
@@ -71,19 +66,13 @@ def test_a_sweep_runs_past_a_state_point_that_cannot_start_and_lists_it_at_the_e
 
 
 def test_submitit_local_launcher_runs_a_simulation(tmp_path):
-    cmd = [
-        sys.executable,
-        str(ROOT / "simulate.py"),
-        "-m",
+    done = simulate_sweep(
+        tmp_path,
         "hydra/launcher=submitit_local",
         "hydra.launcher.timeout_min=10",
-        "sim=tiny",
         "sim.stress=3",
         "sim.strain=0.03",
-        f"output_root={tmp_path}",
-        "progress=false",
-    ]
-    done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert len(list(tmp_path.glob("multirun/*/trajectory.h5"))) == 1
 
