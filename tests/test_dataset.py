@@ -124,7 +124,7 @@ def test_jamming_onset_per_seed_names_what_is_still_open():
     assert jamming_onset(runs(s10="completed", s20="completed")) == "none up to 20"
     assert jamming_onset(runs(s20="completed", s50="interrupted")) == "none up to 20 (50 unfinished)"
     assert jamming_onset(runs(s14="running", s20="jammed", s100="running")) == "20 (14 unfinished)"
-    assert jamming_onset(runs(s0_5="interrupted")) == "none up to 0 (0.5 unfinished)"
+    assert jamming_onset(runs(s0_5="interrupted")) == "none yet (0.5 unfinished)"
     stalling = runs(s20="completed", s100="interrupted")
     stalling[1]["stalled_since"] = 0.884
     assert jamming_onset(stalling) == "none up to 20 (100 unfinished; 100 stalling since strain 0.88)"

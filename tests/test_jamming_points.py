@@ -8,6 +8,7 @@ import pytest
 from rheograph.errors import InputError
 from rheograph.jamming_points import (
     arrest_bracket,
+    arrest_probability,
     bootstrap,
     fit_divergence,
     fit_wyart_cates,
@@ -43,8 +44,10 @@ def test_wyart_cates_fit_recovers_both_jamming_points_from_mixed_friction():
     assert free["beta"] == pytest.approx(1.7, abs=1e-5) and free["phi_j0"] == pytest.approx(0.85, abs=1e-6)
 
 
-def _run(n, phi, stress, seed, eta, mu=0.5, z_mu=0.0, z=2.0, status="completed"):
-    return dict(n=n, phi=phi, stress=stress, seed=seed, mu=mu, status=status, eta=eta, z_mu=z_mu, z=z)
+def _run(n, phi, stress, seed, eta, mu=0.5, z_mu=0.0, z=2.0, status="completed", strain=3.0):
+    return dict(
+        n=n, phi=phi, stress=stress, seed=seed, mu=mu, status=status, strain=strain, eta=eta, z_mu=z_mu, z=z
+    )
 
 
 def test_branches_select_frictionless_and_plateau_runs_and_skip_jammed_ones():
@@ -81,6 +84,57 @@ def test_arrest_bracket_lies_between_the_last_area_fraction_that_flows_and_the_f
     rows = [r for r in jamming_table(branch) if r["method"].startswith("arrest bracket")]
     assert len(rows) == 1 and rows[0]["quantity"] == "phi_J^0" and rows[0]["phi_j"] == pytest.approx(0.835)
     assert rows[0]["phi_j_ci"] == (0.83, 0.84)
+
+
+def _arrests(phi, arrested, flowing, strain=3.0):
+    """Runs at phi on the sigma/sigma0 = 200 plateau: ``arrested`` that jammed (at half the window),
+    ``flowing`` that reached ``strain``."""
+    return [
+        *(_run(400, phi, 200.0, s, np.inf, status="jammed", strain=strain / 2) for s in range(arrested)),
+        *(_run(400, phi, 200.0, 100 + s, 500.0, strain=strain) for s in range(flowing)),
+    ]
+
+
+def test_arrest_probability_half_is_the_maximum_likelihood_logistic_crossing():
+    """Mixed outcomes: phi_1/2 is the crossing -intercept / slope of an unpenalised logistic regression
+    (scikit-learn, an independent maximiser), inside its profile interval; a symmetric design puts it
+    at the middle area fraction."""
+    from sklearn.linear_model import LogisticRegression
+
+    branch = [
+        *_arrests(0.780, 0, 6),
+        *_arrests(0.785, 1, 5),
+        *_arrests(0.790, 2, 4),
+        *_arrests(0.795, 4, 2),
+        *_arrests(0.800, 5, 1),
+        *_arrests(0.805, 6, 0),
+    ]
+    out = arrest_probability(branch)
+    phi = np.array([[r["phi"]] for r in branch])
+    y = np.array([r["status"] == "jammed" for r in branch])
+    # phi in units of 0.01 keeps the unpenalised problem well scaled for lbfgs
+    reference = LogisticRegression(C=np.inf, tol=1e-10, max_iter=10_000).fit((phi - 0.79) / 0.01, y)
+    crossing = 0.79 - 0.01 * reference.intercept_[0] / reference.coef_[0, 0]
+    assert out["phi_half"] == pytest.approx(crossing, abs=5e-5)
+    low, high = out["interval"]
+    assert low < out["phi_half"] < high and 0.001 < high - low < 0.01
+    assert (out["runs"], out["arrested"], out["window"]) == (36, 18, 3.0)
+    symmetric = arrest_probability([*_arrests(0.78, 0, 4), *_arrests(0.79, 2, 2), *_arrests(0.80, 4, 0)])
+    assert symmetric["phi_half"] == pytest.approx(0.79, abs=3e-5)
+
+
+def test_arrest_probability_is_the_bracket_when_outcomes_separate_and_counts_late_arrests_as_flowing():
+    separated = arrest_probability([*_arrests(0.83, 0, 3), *_arrests(0.84, 3, 0)])
+    assert separated["phi_half"] == pytest.approx(0.835, abs=1e-4)
+    # the gap, less the steepest logistic's width (1e-4) at each end
+    assert separated["interval"][0] == pytest.approx(0.83, abs=3e-4)
+    assert separated["interval"][1] == pytest.approx(0.84, abs=3e-4)
+    # the shortest run that flowed to its end went 2 strain: arrests after that count as flowing within it
+    late = [*_arrests(0.83, 0, 3, strain=2.0), *_arrests(0.84, 3, 0, strain=5.0)]
+    assert arrest_probability(late) is None  # nothing arrests within 2 strain
+    assert arrest_probability(_arrests(0.84, 3, 0)) is None  # no run flowed: no window, no crossing
+    stopped = _run(400, 0.835, 200.0, 9, np.nan, status="interrupted", strain=0.5)
+    assert arrest_probability([*_arrests(0.83, 0, 3), stopped, *_arrests(0.84, 3, 0)])["runs"] == 6
 
 
 def test_bootstrap_interval_brackets_the_true_jamming_point_of_noisy_seeds():

@@ -175,7 +175,9 @@ def jamming_onset(runs: list[dict]) -> str:
         f"; {x:g} stalling since strain {since:.2f}" for x, since in open_runs if since is not None
     )
     pending = f" ({', '.join(f'{x:g}' for x, _ in open_runs)} unfinished{stalls})" if open_runs else ""
-    return f"{jammed[0]:g}{pending}" if jammed else f"none up to {max(flowed, default=0):g}{pending}"
+    if jammed:
+        return f"{jammed[0]:g}{pending}"
+    return (f"none up to {max(flowed):g}" if flowed else "none yet") + pending
 
 
 def _median(values) -> str:
@@ -303,13 +305,14 @@ def card_markdown(records: list[dict], points: list[dict], command: str, min_str
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (n, phi), runs in sorted(by_phi_n.items()):
-        tau = np.nanmedian([r["decorrelation"]["viscosity"] for r in runs])
+        taus = [r["decorrelation"]["viscosity"] for r in runs if np.isfinite(r["decorrelation"]["viscosity"])]
         spacing = np.median([r["snapshot_interval"] for r in runs])
+        neighbour = f"{np.exp(-spacing / np.median(taus)):.2f}" if taus else "–"
         lines.append(
             f"| {n} | {phi:.2f} | "
             + " | ".join(_median([r["decorrelation"][k] for r in runs]) for k in TARGETS)
             + f" | {_median([r['transient'] for r in runs])} | {_ensemble_transient_cells(runs, min_strain)}"
-            f" | {spacing:g} | {np.exp(-spacing / tau):.2f} |"
+            f" | {spacing:g} | {neighbour} |"
         )
     jam_lines = []
     for (n, phi), runs in sorted(by_phi_n.items()):
@@ -385,7 +388,8 @@ def thickening_lines(points: list[dict]) -> list[str]:
             if rate[b] < rate[a]
         ]
         stopped = [q["stress"] for q in pts if q["jammed"] and not np.isfinite(q["viscosity"])]
-        kind = "discontinuous (S-shape)" if falls else "continuous"
+        # no finished flowing point: nothing to call the flow curve yet
+        kind = "discontinuous (S-shape)" if falls else "continuous" if flowing else "–"
         lines.append(
             f"| {n} | {phi:.2f} | {kind} | {', '.join(falls) or '–'} | "
             f"{', '.join(f'{s:g}' for s in stopped) or 'none'} |"

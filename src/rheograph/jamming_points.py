@@ -25,17 +25,20 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, minimize_scalar
 
 from rheograph.errors import InputError, one_line_errors
 
 FRICTIONLESS_Z_MU = 0.02  # a sigma <= 0.5 run below this frictional coordination is on the mu = 0 branch
 BOOTSTRAP = 400
+# 1 / (logistic width): 1e4 is a width of 1e-4 in phi, a step at the resolution of any phi grid run
+MAX_ARREST_RATE = 1e4
 
 
 def read_runs(index_paths) -> list[dict]:
-    """One record per trajectory of the indexes: N, phi, sigma/sigma0, seed, mu, status, steady eta_r,
-    Z_mu, Z (NaN where the run did not flow)."""
+    """One record per trajectory of the indexes: N, phi, sigma/sigma0, seed, mu, status, the strain it
+    reached (where it arrested, for a jammed run), steady eta_r, Z_mu, Z (NaN where the run did not
+    flow)."""
     runs = []
     for path in index_paths:
         try:
@@ -54,6 +57,7 @@ def read_runs(index_paths) -> list[dict]:
                     "seed": int(p["seed"]),
                     "mu": float(p["mu"]),
                     "status": entry["status"],
+                    "strain": float(entry.get("strain") or np.nan),
                     "eta": float(s.get("viscosity") or np.nan),
                     "z_mu": float(s.get("z_mu") if s.get("z_mu") is not None else np.nan),
                     "z": float(s.get("z") if s.get("z") is not None else np.nan),
@@ -107,6 +111,54 @@ def arrest_bracket(branch: list[dict]) -> tuple[float, float, int] | None:
         return None
     low = max(flows)
     return low, high, sum(low <= r["phi"] <= high for r in decided)
+
+
+def arrest_probability(branch: list[dict]) -> dict | None:
+    """The area fraction phi_1/2 at which a run of the branch arrests within a common strain window with
+    probability 1/2, and its 68 % interval.
+
+    Maximum likelihood of a logistic p(phi) = 1 / (1 + exp(-(phi - phi_1/2) / w)), w >= 0 (arrest never
+    gets less likely with phi), over the decided runs; the interval is that of the profile likelihood of
+    phi_1/2 (2 Delta log L <= 1).  The window is the strain of the shortest run that flowed to its end: a
+    run that arrested later counts as flowing within it, so every run is observed over the same strain
+    (arrest is absorbing, so a longer window moves phi_1/2 down).  Where the outcomes separate perfectly
+    in phi the likelihood is flat over the gap, phi_1/2 is its middle and the interval the gap: the
+    arrest bracket.  None without both an arrested and a flowing run.
+
+    Returns dict(phi_half, interval=(low, high), window, runs, arrested)."""
+    decided = [r for r in branch if r["status"] in ("completed", "jammed")]
+    completed = [r["strain"] for r in decided if r["status"] == "completed"]
+    if not completed:
+        return None
+    window = min(completed)
+    phi = np.array([r["phi"] for r in decided])
+    arrested = np.array([r["status"] == "jammed" and r["strain"] < window for r in decided])
+    if arrested.all() or not arrested.any():
+        return None
+
+    def nll(phi_half: float, rate: float) -> float:
+        # -log L with logit = rate (phi - phi_half); logaddexp keeps the saturated terms finite
+        logit = rate * (phi - phi_half)
+        return float(np.sum(np.where(arrested, np.logaddexp(0.0, -logit), np.logaddexp(0.0, logit))))
+
+    def profile(phi_half: float) -> float:
+        # convex in the rate at fixed phi_1/2 (the logit is linear in it)
+        return minimize_scalar(
+            lambda rate: nll(phi_half, rate), bounds=(0.0, MAX_ARREST_RATE), method="bounded"
+        ).fun
+
+    grid = np.arange(phi.min() - 0.02, phi.max() + 0.02, 2e-5)
+    profiled = np.array([profile(x) for x in grid])
+    best = profiled.min()
+    inside = grid[2.0 * (profiled - best) <= 1.0]
+    flat = grid[profiled - best <= 1e-9]
+    return {
+        "phi_half": float(flat.mean()),
+        "interval": (float(inside.min()), float(inside.max())),
+        "window": float(window),
+        "runs": len(decided),
+        "arrested": int(arrested.sum()),
+    }
 
 
 def fit_divergence(phi, eta, beta: float | None = None) -> dict:
@@ -221,6 +273,27 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                         "phi_range": (low, high),
                         "phi_j": 0.5 * (low + high),
                         "phi_j_ci": (low, high),
+                        "beta": np.nan,
+                        "beta_ci": None,
+                        "rms_log": np.nan,
+                    }
+                )
+            crossing = arrest_probability(everyone)
+            if crossing:
+                rows.append(
+                    {
+                        "n": n,
+                        "quantity": name,
+                        "method": f"arrest probability 1/2 within {crossing['window']:.3g} strain "
+                        f"({crossing['arrested']} of {crossing['runs']} arrest; logistic, profile)",
+                        "data": next(label for q, label, _ in branches if q == name),
+                        "trajectories": crossing["runs"],
+                        "phi_range": (
+                            min(r["phi"] for r in everyone if r["status"] in ("completed", "jammed")),
+                            max(r["phi"] for r in everyone if r["status"] in ("completed", "jammed")),
+                        ),
+                        "phi_j": crossing["phi_half"],
+                        "phi_j_ci": crossing["interval"],
                         "beta": np.nan,
                         "beta_ci": None,
                         "rms_log": np.nan,
