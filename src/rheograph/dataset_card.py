@@ -185,12 +185,14 @@ def _median(values) -> str:
     return f"{np.median(v):.3f} ({v.min():.3f}–{v.max():.3f})" if v.size else "–"
 
 
-def card_markdown(records: list[dict], points: list[dict], command: str, min_strain: float) -> str:
+def card_markdown(
+    records: list[dict], points: list[dict], command: str, min_strain: float, title: str = "Dataset card"
+) -> str:
     by_phi_n = defaultdict(list)
     for r in records:
         by_phi_n[(r["n"], r["phi"])].append(r)
     lines = [
-        "# Dataset card",
+        f"# {title}",
         "",
         "Regenerate (resumable; finished state points are skipped):",
         "",
@@ -515,6 +517,7 @@ def main(argv=None) -> None:
         ),
         help="the command that regenerates the set (quoted in the card)",
     )
+    ap.add_argument("--title", default="Dataset card", help="the card's heading")
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
     if not data.is_dir():
@@ -526,7 +529,7 @@ def main(argv=None) -> None:
         raise InputError(f"no rheograph trajectory under {data}")
     (out / "figures").mkdir(parents=True, exist_ok=True)
     points = collect([data])
-    (out / "dataset.md").write_text(card_markdown(records, points, args.command, args.min_strain))
+    (out / "dataset.md").write_text(card_markdown(records, points, args.command, args.min_strain, args.title))
     plot_fig2(records, points, out / "figures" / "dataset_fig2.png")
     plot_fig3(records, out / "figures" / "dataset_fig3.png")
     print(f"{len(records)} runs -> {out / 'dataset.md'}, {data / 'index.json'}")
