@@ -155,6 +155,9 @@ def main(argv=None) -> int:
         ap.error("--every must be >= 1 and each --noise in [0, 1) (units of a)")
     # a quoted glob is expanded here, so that the command quoted in the docs stays short
     sources = [Path(q) for s in args.sources for q in (sorted(glob.glob(s)) if glob.has_magic(s) else [s])]
+    unmatched = [s for s in args.sources if glob.has_magic(s) and not glob.glob(s)]
+    if unmatched:
+        ap.error(f"no file matches {', '.join(unmatched)} (run directories name φ as 0.7, not 0.70)")
     paths = sorted(q for s in sources for q in (s.rglob("trajectory.h5") if s.is_dir() else [s]))
     if not paths:
         ap.error(f"no trajectory files in {args.sources}")
