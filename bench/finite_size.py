@@ -18,6 +18,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binomtest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import command_line, publish  # noqa: E402
@@ -53,7 +54,8 @@ def table(points, min_sizes: int) -> list[str]:
 
 
 def arrest_table(points, phi: float) -> list[str]:
-    """Share of runs that arrested at each (σ, N) at one φ."""
+    """Share of runs that arrested at each (σ, N) at one φ, and per N over the stresses from the arrest
+    onset on, with its binomial interval."""
     rows = [p for p in points if np.isclose(p["phi"], phi) and p["mu"] > 0]
     sizes = sorted({p["n_particles"] for p in rows})
     stresses = sorted({p["stress"] for p in rows})
@@ -74,6 +76,20 @@ def arrest_table(points, phi: float) -> list[str]:
                 f"{p['n_jammed']}/{p['n_finished']}" + (f" (+{unfinished} unfinished)" if unfinished else "")
             )
         lines.append(f"| {s:g} | " + " | ".join(out) + " |")
+    onset = min((p["stress"] for p in rows if p["n_jammed"]), default=None)
+    if onset is not None:
+        # one probability per N over every stress from the smallest at which any run arrested, with the
+        # exact (Clopper-Pearson) 68 % binomial interval: seeds and stresses are the trials
+        out = []
+        for n in sizes:
+            above = [p for p in rows if p["n_particles"] == n and p["stress"] >= onset]
+            jammed, finished = sum(p["n_jammed"] for p in above), sum(p["n_finished"] for p in above)
+            if not finished:
+                out.append("")
+                continue
+            ci = binomtest(jammed, finished).proportion_ci(confidence_level=0.68)
+            out.append(f"{jammed / finished:.2f} ({ci.low:.2f}–{ci.high:.2f}) of {finished}")
+        lines.append(f"| arrest probability, σ/σ0 ≥ {onset:g} (68 %) | " + " | ".join(out) + " |")
     return lines
 
 
