@@ -97,10 +97,19 @@ def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed:
         key = np.concatenate(
             [state_point_key(np.full(k.size, s.phi), np.full(k.size, s.stress)) for s, k in members]
         )
-        common = {"n": n, "phi": phi, "snapshots": int(true.shape[0]), "stresses": int(np.unique(key).size)}
         lookups = other_seeds_mean(members)
+        # where a lookup exists, every row is scored on the snapshots it covers (state points with
+        # another seed): R² over different snapshots would not compare
+        have = np.concatenate([np.full(k.size, x is not None) for (_, k), x in zip(members, lookups)])
+        if not have.any():
+            have[:] = True
+        common = {
+            "n": n,
+            "phi": phi,
+            "snapshots": int(have.sum()),
+            "stresses": int(np.unique(key[have]).size),
+        }
         if any(x is not None for x in lookups):
-            have = np.concatenate([np.full(k.size, x is not None) for (_, k), x in zip(members, lookups)])
             pred = np.concatenate([x for x in lookups if x is not None])
             rows.append(
                 {
@@ -108,7 +117,6 @@ def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed:
                     "model": "lookup: other seeds' mean at (φ, σ)",
                     "zero_shot": None,
                     "eps": None,
-                    "snapshots": int(have.sum()),
                     **fold_metrics(pred, true[have], key[have]),
                 }
             )
@@ -132,7 +140,7 @@ def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed:
                         # a model scored on its own N has seen these trajectories (or their neighbours)
                         "zero_shot": n not in model.domain["n_particles"],
                         "eps": eps,
-                        **fold_metrics(np.concatenate(preds), true, key),
+                        **fold_metrics(np.concatenate(preds)[have], true[have], key[have]),
                     }
                 )
     return rows
@@ -170,7 +178,7 @@ def main(argv=None) -> int:
         "Gaussian noise per coordinate added to the positions and declared to the model (units of a).  "
         "The lookup is the mean of the other seeds' runs at the same (N, φ, σ): what a user who had "
         "simulated that state point would predict without reading a snapshot (absent where a state point "
-        "has one run).",
+        "has one run; where it exists, every row of that (N, φ) is scored on the snapshots it covers).",
         "",
         "| N | φ | model | zero-shot | ε [a] | snapshots | stresses | R² log η_r | R² log Π | R² Z_μ | "
         "fluct. η_r |",
