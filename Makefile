@@ -11,7 +11,7 @@ export OMP_WAIT_POLICY ?= PASSIVE
 SYSTEM_PACKAGES := libsuitesparse-dev libopenblas0-serial
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: install system-packages demo test test-slow lint docs
+.PHONY: install system-packages demo test test-slow lint docs cards
 
 install: $(VENV)/.installed
 
@@ -58,3 +58,21 @@ $(VENV)/.docs-installed: $(VENV)/.installed
 lint: install
 	$(VENV)/bin/ruff check src tests bench *.py
 	$(VENV)/bin/ruff format --check src tests bench *.py
+
+# the dataset cards of the committed sets (tables and figures from the trajectory files; each quotes the
+# simulate commands that regenerate its runs)
+cards: install
+	$(PY) -m rheograph.dataset_card data/paper --out docs
+	$(PY) -m rheograph.dataset_card data/jamming --out docs/datasets/jamming \
+	    --title "Dataset card: runs near jamming" \
+	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1   # phi 0.79" \
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.785,0.795 sim.seed=1,2,3,4,5,6" \
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.79 sim.seed=4,5,6" \
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.7875 sim.seed=1,2,3"
+	$(PY) -m rheograph.dataset_card data/large_n --out docs/datasets/large_n \
+	    --title "Dataset card: large systems" \
+	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1 sim.n_particles=400,2000   # phi 0.76" \
+	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1   # N = 8000" \
+	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1 sim.n_particles=20000" \
+	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1   # phi 0.80, N = 8000"

@@ -167,7 +167,7 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
 
     def record(stress, status, flowing, seed=1):
         return dict(
-            n=2000, phi=0.8, stress=stress, seed=seed, status=status, n_snapshots=flowing,
+            n=2000, phi=0.8, mu=0.5, stress=stress, seed=seed, status=status, n_snapshots=flowing,
             n_flowing_snapshots=flowing, n_jammed_snapshots=0, cpu_seconds=3600.0, bytes=10**6,
             snapshot_interval=0.1, decorrelation=dict(viscosity=0.2, pressure=0.2, z_mu=0.2),
             transient=0.3, arrested=dict(pressure=np.array([]), z_mu=np.array([])),
@@ -182,7 +182,7 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
 
     def point(stress, statuses, seeds):
         return dict(
-            n_particles=2000, phi=0.8, stress=stress, statuses=statuses, n_seeds=seeds, jammed=False,
+            n_particles=2000, phi=0.8, mu=0.5, stress=stress, statuses=statuses, n_seeds=seeds, jammed=False,
             viscosity=1000.0, viscosity_se=50.0, pressure=40.0, pressure_se=1.0, z_mu=2.5, z_mu_se=0.01,
         )  # fmt: skip
 
@@ -206,6 +206,7 @@ def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_s
         dict(
             n=400,
             phi=0.7,
+            mu=0.5,
             stress=stress,
             seed=seed,
             status="completed",
@@ -230,3 +231,16 @@ def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_s
     card = card_markdown(records, [], "python simulate.py -m …", 1.0)
     row = next(line for line in card.splitlines() if line.startswith("| 400 | 0.70 | 0.100"))
     assert re.search(r"\| 1\.5 \| \+0\.01[1-5]; largest \+0\.01[1-5] \(σ/σ0 = [12]\) \|", row), row
+
+
+def test_the_card_keeps_area_fractions_apart_that_two_decimals_would_merge_and_marks_frictionless_runs():
+    from rheograph.dataset_card import series_label
+
+    assert [series_label(phi, 0.5) for phi in (0.785, 0.7875, 0.79, 0.795, 0.8)] == [
+        "0.785",
+        "0.7875",
+        "0.79",
+        "0.795",
+        "0.80",
+    ]
+    assert series_label(0.8, 0.0) == "0.80, μ = 0"

@@ -32,6 +32,15 @@ from rheograph.io.index import USABLE, build_index, write_index
 from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
+# what regenerates the committed paper-scale set (data/paper), quoted in its card
+PAPER_SET_COMMANDS = (
+    "python simulate.py -m experiment=dataset_paper_n400_phi070_074      # N = 400, phi 0.70-0.74",
+    "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.76, 0.78",
+    "python simulate.py -m experiment=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)",
+    "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.70,0.76   # N = 2000, two seeds",
+    "python simulate.py -m experiment=dataset_paper_phi080 sim.n_particles=2000 sim.seed=1,2"
+    "   # N = 2000, phi 0.80",
+)
 
 
 def run_cpu_seconds(path: str | Path) -> float:
@@ -96,6 +105,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
             dict(
                 n=p["n_particles"],
                 phi=p["phi"],
+                mu=p["mu"],
                 stress=p["stress"],
                 seed=p["seed"],
                 status=entry["status"],
@@ -180,6 +190,13 @@ def jamming_onset(runs: list[dict]) -> str:
     return (f"none up to {max(flowed):g}" if flowed else "none yet") + pending
 
 
+def series_label(phi: float, mu: float) -> str:
+    """φ as simulated (two decimals at least, no rounding: 0.785 and 0.79 stay apart), with frictionless
+    runs (μ = 0) marked."""
+    text = f"{phi:.2f}" if round(phi, 2) == phi else f"{phi:g}"
+    return text + (", μ = 0" if mu == 0.0 else "")
+
+
 def _median(values) -> str:
     v = np.array([x for x in values if np.isfinite(x)])
     return f"{np.median(v):.3f} ({v.min():.3f}–{v.max():.3f})" if v.size else "–"
@@ -190,7 +207,7 @@ def card_markdown(
 ) -> str:
     by_phi_n = defaultdict(list)
     for r in records:
-        by_phi_n[(r["n"], r["phi"])].append(r)
+        by_phi_n[(r["n"], r["phi"], r["mu"])].append(r)
     lines = [
         f"# {title}",
         "",
@@ -214,11 +231,11 @@ def card_markdown(
         "| CPU h | MB |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for (n, phi), runs in sorted(by_phi_n.items()):
+    for (n, phi, mu), runs in sorted(by_phi_n.items()):
         status = [r["status"] for r in runs]
         usable = [r for r in runs if r["status"] in USABLE]
         lines.append(
-            f"| {n} | {phi:.2f} | {len(runs)} | {len({r['seed'] for r in runs})} "
+            f"| {n} | {series_label(phi, mu)} | {len(runs)} | {len({r['seed'] for r in runs})} "
             f"| {status.count('completed')} | {status.count('jammed')} "
             f"| {len(runs) - len(usable)} "
             f"| {sum(r['n_flowing_snapshots'] for r in usable)} "
@@ -263,17 +280,21 @@ def card_markdown(
     ]
     stresses = sorted({r["stress"] for r in records})
     for n in sorted({r["n"] for r in records}):
-        phis = sorted({r["phi"] for r in records if r["n"] == n})
+        series = sorted({(r["phi"], r["mu"]) for r in records if r["n"] == n})
         lines += [
             f"N = {n}:",
             "",
-            "| σ/σ0 | " + " | ".join(f"φ = {phi:.2f}" for phi in phis) + " |",
-            "|---|" + "---|" * len(phis),
+            "| σ/σ0 | " + " | ".join(f"φ = {series_label(*x)}" for x in series) + " |",
+            "|---|" + "---|" * len(series),
         ]
         for s in stresses:
             cells = []
-            for phi in phis:
-                runs = [r for r in records if r["n"] == n and r["phi"] == phi and r["stress"] == s]
+            for phi, mu in series:
+                runs = [
+                    r
+                    for r in records
+                    if r["n"] == n and r["phi"] == phi and r["mu"] == mu and r["stress"] == s
+                ]
                 done = sum(r["status"] == "completed" for r in runs)
                 jam = sum(r["status"] == "jammed" for r in runs)
                 cells.append(f"{done}/{len(runs)}" + (f" J{jam}" if jam else "") if runs else "–")
@@ -306,21 +327,21 @@ def card_markdown(
         "| neighbour correlation |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for (n, phi), runs in sorted(by_phi_n.items()):
+    for (n, phi, mu), runs in sorted(by_phi_n.items()):
         taus = [r["decorrelation"]["viscosity"] for r in runs if np.isfinite(r["decorrelation"]["viscosity"])]
         spacing = np.median([r["snapshot_interval"] for r in runs])
         neighbour = f"{np.exp(-spacing / np.median(taus)):.2f}" if taus else "–"
         lines.append(
-            f"| {n} | {phi:.2f} | "
+            f"| {n} | {series_label(phi, mu)} | "
             + " | ".join(_median([r["decorrelation"][k] for r in runs]) for k in TARGETS)
             + f" | {_median([r['transient'] for r in runs])} | {_ensemble_transient_cells(runs, min_strain)}"
             f" | {spacing:g} | {neighbour} |"
         )
     jam_lines = []
-    for (n, phi), runs in sorted(by_phi_n.items()):
+    for (n, phi, mu), runs in sorted(by_phi_n.items()):
         for seed in sorted({r["seed"] for r in runs}):
             onset = jamming_onset([r for r in runs if r["seed"] == seed])
-            jam_lines.append(f"| {n} | {phi:.2f} | {seed} | {onset} |")
+            jam_lines.append(f"| {n} | {series_label(phi, mu)} | {seed} | {onset} |")
     lines += [
         "",
         "## Shear jamming: smallest jammed σ/σ0 per seed",
@@ -349,7 +370,7 @@ def card_markdown(
         # a point averaged over an unfinished run is provisional: said in the seeds column
         seeds = f"{pt['n_seeds']}" + ("" if set(pt["statuses"]) <= set(USABLE) else " (unfinished)")
         lines.append(
-            f"| {pt['n_particles']} | {pt['phi']:.2f} | {pt['stress']:g} | {seeds} | "
+            f"| {pt['n_particles']} | {series_label(pt['phi'], pt['mu'])} | {pt['stress']:g} | {seeds} | "
             + " | ".join(cells)
             + " |"
         )
@@ -378,9 +399,9 @@ def thickening_lines(points: list[dict]) -> list[str]:
     means (gamma_dot = sigma / eta_r)."""
     by_n_phi = defaultdict(list)
     for pt in points:
-        by_n_phi[(pt["n_particles"], pt["phi"])].append(pt)
+        by_n_phi[(pt["n_particles"], pt["phi"], pt["mu"])].append(pt)
     lines = []
-    for (n, phi), pts in sorted(by_n_phi.items()):
+    for (n, phi, mu), pts in sorted(by_n_phi.items()):
         pts = sorted(pts, key=lambda q: q["stress"])
         rate = {q["stress"]: q["stress"] / q["viscosity"] for q in pts if np.isfinite(q["viscosity"])}
         flowing = sorted(rate)
@@ -393,15 +414,18 @@ def thickening_lines(points: list[dict]) -> list[str]:
         # no finished flowing point: nothing to call the flow curve yet
         kind = "discontinuous (S-shape)" if falls else "continuous" if flowing else "–"
         lines.append(
-            f"| {n} | {phi:.2f} | {kind} | {', '.join(falls) or '–'} | "
+            f"| {n} | {series_label(phi, mu)} | {kind} | {', '.join(falls) or '–'} | "
             f"{', '.join(f'{s:g}' for s in stopped) or 'none'} |"
         )
     return lines
 
 
-def _flow_curve(points, n, phi, key):
-    """(stresses, steady means) of one (N, phi) flow curve, NaN-free."""
-    pts = sorted((q for q in points if q["n_particles"] == n and q["phi"] == phi), key=lambda q: q["stress"])
+def _flow_curve(points, n, phi, mu, key):
+    """(stresses, steady means) of one (N, phi, mu) flow curve, NaN-free."""
+    pts = sorted(
+        (q for q in points if q["n_particles"] == n and q["phi"] == phi and q["mu"] == mu),
+        key=lambda q: q["stress"],
+    )
     s = np.array([q["stress"] for q in pts])
     v = np.array([q[key] for q in pts])
     ok = np.isfinite(v)
@@ -417,14 +441,18 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     ns = sorted({r["n"] for r in records})
-    phis = sorted({r["phi"] for r in records})
-    colours = dict(zip(phis, plt.cm.viridis(np.linspace(0, 0.9, len(phis)))))
+    series = sorted({(r["phi"], r["mu"]) for r in records})
+    colours = dict(zip(series, plt.cm.viridis(np.linspace(0, 0.9, len(series)))))
     fig, grid = plt.subplots(len(ns), 4, figsize=(17, 4.0 * len(ns)), squeeze=False)
     rng = np.random.default_rng(0)
     for axes, n in zip(grid, ns):
-        for phi in phis:
-            colour = colours[phi]
-            runs = [r for r in records if r["n"] == n and r["phi"] == phi and r["status"] in USABLE]
+        for phi, mu in series:
+            colour = colours[(phi, mu)]
+            runs = [
+                r
+                for r in records
+                if r["n"] == n and r["phi"] == phi and r["mu"] == mu and r["status"] in USABLE
+            ]
             if not runs:
                 continue
             flowing = [r for r in runs if r["n_flowing_snapshots"]]
@@ -434,7 +462,7 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
                 keys = (*TARGETS, "shear_rate")
                 snap = {k: np.concatenate([r["snapshots"][k] for r in flowing]) for k in keys}
                 kw = dict(s=4, alpha=0.35, color=colour)
-                axes[0].scatter(s, snap["viscosity"], label=f"φ = {phi:.2f}", **kw)
+                axes[0].scatter(s, snap["viscosity"], label=f"φ = {series_label(phi, mu)}", **kw)
                 axes[1].scatter(snap["shear_rate"], snap["viscosity"], **kw)
                 axes[2].scatter(s, snap["pressure"], **kw)
                 axes[3].scatter(s, snap["z_mu"], **kw)
@@ -444,11 +472,11 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
                 kw = dict(s=30, marker="x", color=colour, linewidths=1.2)
                 axes[2].scatter(s, np.concatenate([r["arrested"]["pressure"] for r in arrested]), **kw)
                 axes[3].scatter(s, np.concatenate([r["arrested"]["z_mu"] for r in arrested]), **kw)
-            stress, eta = _flow_curve(points, n, phi, "viscosity")
+            stress, eta = _flow_curve(points, n, phi, mu, "viscosity")
             axes[0].plot(stress, eta, "-", color=colour, lw=1.5)
             axes[1].plot(stress / eta, eta, "-", color=colour, lw=1.5)
             for ax, key in ((axes[2], "pressure"), (axes[3], "z_mu")):
-                ax.plot(*_flow_curve(points, n, phi, key), "-", color=colour, lw=1.5)
+                ax.plot(*_flow_curve(points, n, phi, mu, key), "-", color=colour, lw=1.5)
         labels = [("σ/σ0", "η_r"), ("γ̇/γ̇0", "η_r"), ("σ/σ0", "Π/σ0"), ("σ/σ0", "Z_μ")]
         for ax, (xl, yl) in zip(axes, labels):
             ax.set_xscale("log")
@@ -472,12 +500,16 @@ def plot_fig3(records: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    phis = sorted({r["phi"] for r in records})
-    fig = plt.figure(figsize=(4.4 * len(phis), 7.4))
-    ratios = dict(height_ratios=[1, 3, 1, 3], width_ratios=[3, 1] * len(phis))
-    grid = fig.add_gridspec(4, 2 * len(phis), hspace=0.5, wspace=0.35, **ratios)
-    for col, phi in enumerate(phis):
-        runs = [r for r in records if r["phi"] == phi and r["n_flowing_snapshots"] and r["status"] in USABLE]
+    series = sorted({(r["phi"], r["mu"]) for r in records})
+    fig = plt.figure(figsize=(4.4 * len(series), 7.4))
+    ratios = dict(height_ratios=[1, 3, 1, 3], width_ratios=[3, 1] * len(series))
+    grid = fig.add_gridspec(4, 2 * len(series), hspace=0.5, wspace=0.35, **ratios)
+    for col, (phi, mu) in enumerate(series):
+        runs = [
+            r
+            for r in records
+            if r["phi"] == phi and r["mu"] == mu and r["n_flowing_snapshots"] and r["status"] in USABLE
+        ]
         if not runs:
             continue
         z = np.concatenate([r["snapshots"]["z_mu"] for r in runs])
@@ -491,7 +523,7 @@ def plot_fig3(records: list[dict], path: Path) -> None:
             main.hist2d(z[ok], logv, bins=30, cmap="magma_r")
             top.hist(z[ok], bins=30, color="grey")
             side.hist(logv, bins=30, color="grey", orientation="horizontal")
-            top.set_title(f"φ = {phi:.2f}" if row == 1 else "", fontsize=9)
+            top.set_title(f"φ = {series_label(phi, mu)}" if row == 1 else "", fontsize=9)
             top.tick_params(labelbottom=False)
             side.tick_params(labelleft=False)
             main.set_xlabel("Z_μ")
@@ -507,15 +539,9 @@ def main(argv=None) -> None:
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument(
         "--command",
-        default=(
-            "python simulate.py -m experiment=dataset_paper_n400_phi070_074      # N = 400, phi 0.70-0.74\n"
-            "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.76, 0.78\n"
-            "python simulate.py -m experiment=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)\n"
-            "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.70,0.76   # N = 2000, two seeds\n"
-            "python simulate.py -m experiment=dataset_paper_phi080 sim.n_particles=2000 sim.seed=1,2"
-            "   # N = 2000, phi 0.80"
-        ),
-        help="the command that regenerates the set (quoted in the card)",
+        action="append",
+        help="a command that regenerates (part of) the set, quoted in the card; repeat for several "
+        "(default: the paper-scale set's)",
     )
     ap.add_argument("--title", default="Dataset card", help="the card's heading")
     args = ap.parse_args(argv)
@@ -529,7 +555,8 @@ def main(argv=None) -> None:
         raise InputError(f"no rheograph trajectory under {data}")
     (out / "figures").mkdir(parents=True, exist_ok=True)
     points = collect([data])
-    (out / "dataset.md").write_text(card_markdown(records, points, args.command, args.min_strain, args.title))
+    commands = "\n".join(args.command or PAPER_SET_COMMANDS)
+    (out / "dataset.md").write_text(card_markdown(records, points, commands, args.min_strain, args.title))
     plot_fig2(records, points, out / "figures" / "dataset_fig2.png")
     plot_fig3(records, out / "figures" / "dataset_fig3.png")
     print(f"{len(records)} runs -> {out / 'dataset.md'}, {data / 'index.json'}")
