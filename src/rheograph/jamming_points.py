@@ -402,8 +402,9 @@ def replace_section(path: Path, name: str, body: str) -> None:
 
 
 def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
-    """(phi, sigma/sigma0) plane: flowing and jammed state points per N, and the Wyart–Cates jamming line
-    phi_m(f(sigma)) with f the mean measured Z_mu / Z per stress."""
+    """(phi, sigma/sigma0) plane: flowing and jammed state points per N, the Wyart–Cates jamming line
+    phi_m(f(sigma)) with f the mean measured Z_mu / Z per stress, the branch divergences and the
+    arrest-probability intervals."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -449,13 +450,31 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
             if row:
                 symbol = r"$\phi_J^0$" if quantity == "phi_J^0" else r"$\phi_J^\mu$"
                 ax.axvline(row["phi_j"], color="0.4", ls=style, label=f"{symbol} (divergence)")
+            crossing = next(
+                (
+                    r
+                    for r in rows
+                    if r["n"] == n
+                    and r["quantity"] == quantity
+                    and r["method"].startswith("arrest probability")
+                ),
+                None,
+            )
+            if crossing:
+                symbol = r"$\phi_J^0$" if quantity == "phi_J^0" else r"$\phi_J^\mu$"
+                ax.axvspan(
+                    *crossing["phi_j_ci"],
+                    color="tab:red" if quantity == "phi_J^mu" else "tab:purple",
+                    alpha=0.2,
+                    label=f"{symbol}: arrest probability 1/2 (68 %)",
+                )
         ax.set_xscale("linear")
         ax.set_yscale("log")
         ax.set_xlabel(r"$\phi$")
         ax.set_title(f"N = {n}")
     axes[0][0].set_ylabel(r"$\sigma/\sigma_0$")
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8, frameon=False)
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
     fig.savefig(path, dpi=130)
     plt.close(fig)
