@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import glob
 import io
 import sys
 from pathlib import Path
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from zero_shot_n import _noisy  # noqa: E402
+from zero_shot_n import _noisy, trajectory_paths  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -29,15 +28,13 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model", help="a shipped model's name or a model directory")
-    ap.add_argument("sources", nargs="+", help="trajectory files or quoted globs")
+    ap.add_argument("sources", nargs="+", help="trajectory files, globs, or directories searched for them")
     ap.add_argument("--noise", type=float, default=0.0, help="position noise ε [a], declared")
     ap.add_argument("--every", type=int, default=1, help="every n-th snapshot")
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=0, help="of the noise draws")
     args = ap.parse_args(argv)
-    paths = sorted(q for s in args.sources for q in (glob.glob(s) if glob.has_magic(s) else [s]))
-    if not paths:
-        ap.error(f"no trajectory files in {args.sources}")
+    paths = trajectory_paths(args.sources, ap)
     model = load_model(args.model)
     rng = np.random.default_rng([args.seed, int(round(args.noise * 1e6))])
     rows = []
@@ -70,4 +67,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from rheograph.errors import one_line_errors
+
+    with one_line_errors("bench/zero_shot_bias.py"):
+        sys.exit(main())

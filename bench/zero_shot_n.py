@@ -146,6 +146,20 @@ def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed:
     return rows
 
 
+def trajectory_paths(sources: list[str], ap: argparse.ArgumentParser) -> list[Path]:
+    """The trajectory files of ``sources`` (files, directories searched for them, or quoted globs,
+    expanded here so that the commands quoted in the docs stay short), sorted; a glob that matches
+    nothing, or no file at all, ends the command with one line naming it."""
+    unmatched = [s for s in sources if glob.has_magic(s) and not glob.glob(s)]
+    if unmatched:
+        ap.error(f"no file matches {', '.join(unmatched)} (run directories name φ as 0.7, not 0.70)")
+    expanded = [Path(q) for s in sources for q in (sorted(glob.glob(s)) if glob.has_magic(s) else [s])]
+    paths = sorted(q for s in expanded for q in (s.rglob("trajectory.h5") if s.is_dir() else [s]))
+    if not paths:
+        ap.error(f"no trajectory files in {sources}")
+    return paths
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sources", nargs="+", help="trajectory files, globs, or directories searched for them")
@@ -161,14 +175,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.every < 1 or any(not 0.0 <= eps < 1.0 for eps in args.noise):
         ap.error("--every must be >= 1 and each --noise in [0, 1) (units of a)")
-    # a quoted glob is expanded here, so that the command quoted in the docs stays short
-    sources = [Path(q) for s in args.sources for q in (sorted(glob.glob(s)) if glob.has_magic(s) else [s])]
-    unmatched = [s for s in args.sources if glob.has_magic(s) and not glob.glob(s)]
-    if unmatched:
-        ap.error(f"no file matches {', '.join(unmatched)} (run directories name φ as 0.7, not 0.70)")
-    paths = sorted(q for s in sources for q in (s.rglob("trajectory.h5") if s.is_dir() else [s]))
-    if not paths:
-        ap.error(f"no trajectory files in {args.sources}")
+    paths = trajectory_paths(args.sources, ap)
     rows = score(args.models, paths, args.min_strain, args.noise, args.every, args.seed)
     thinned = f" (every {args.every}th)" if args.every > 1 else ""
     lines = [
@@ -202,4 +209,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from rheograph.errors import one_line_errors
+
+    with one_line_errors("bench/zero_shot_n.py"):
+        sys.exit(main())

@@ -125,7 +125,7 @@ def arrest_probability(branch: list[dict]) -> dict | None:
     in phi the likelihood is flat over the gap, phi_1/2 is its middle and the interval the gap: the
     arrest bracket.  None without both an arrested and a flowing run.
 
-    Returns dict(phi_half, interval=(low, high), window, runs, arrested)."""
+    Returns dict(phi_half, interval=(low, high), window, runs, arrested, phi_range)."""
     decided = [r for r in branch if r["status"] in ("completed", "jammed")]
     completed = [r["strain"] for r in decided if r["status"] == "completed"]
     if not completed:
@@ -158,6 +158,7 @@ def arrest_probability(branch: list[dict]) -> dict | None:
         "window": float(window),
         "runs": len(decided),
         "arrested": int(arrested.sum()),
+        "phi_range": (float(phi.min()), float(phi.max())),
     }
 
 
@@ -288,10 +289,7 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                         f"({crossing['arrested']} of {crossing['runs']} arrest; logistic, profile)",
                         "data": next(label for q, label, _ in branches if q == name),
                         "trajectories": crossing["runs"],
-                        "phi_range": (
-                            min(r["phi"] for r in everyone if r["status"] in ("completed", "jammed")),
-                            max(r["phi"] for r in everyone if r["status"] in ("completed", "jammed")),
-                        ),
+                        "phi_range": crossing["phi_range"],
                         "phi_j": crossing["phi_half"],
                         "phi_j_ci": crossing["interval"],
                         "beta": np.nan,
