@@ -132,7 +132,7 @@ def command_line(script: str, argv=None) -> str:
     """``python bench/<script> ARGS`` as the user typed it (``argv``, or the process's), less
     ``--no-write``: the command that reproduces a published section."""
     args = argv if argv is not None else sys.argv[1:]
-    return f"python bench/{script} " + shlex.join([a for a in args if a != "--no-write"])
+    return f"python bench/{script} {shlex.join([a for a in args if a != '--no-write'])}".rstrip()
 
 
 def publish(section: str, text: str, write: bool, page: str = "benchmarks.md") -> None:

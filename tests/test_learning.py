@@ -14,6 +14,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch_geometric.data import Batch
 
+from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset, snapshot_graphs
 from rheograph.graphs.features import forward_transform, inverse_transform, snapshot_edges
 from rheograph.io.snapshots import read_snapshots
@@ -101,6 +102,26 @@ def test_graph_targets_are_the_snapshot_values(tiny_files):
     np.testing.assert_allclose([g.y_raw[0, 2].item() for g in graphs], zmu)
     assert all(g.run_id.item() == 7 for g in graphs)
     assert graphs[0].x.shape == (64, 2) and graphs[0].edge_attr.shape[1] == 6
+
+
+def test_snapshot_every_keeps_every_kth_training_snapshot_and_prediction_keeps_all(tiny_files):
+    import h5py
+
+    every = dataclasses.replace(SETTINGS, snapshot_every=3)
+    graphs = snapshot_graphs(tiny_files[1], every, run_id=0)
+    with h5py.File(tiny_files[1]) as h5:
+        strain = h5["snapshots/strain"][()]
+    kept = strain[strain >= SETTINGS.min_strain][::3]
+    assert 3 <= len(graphs) == len(kept)
+    np.testing.assert_allclose(
+        [g.y_raw[0, 0].item() for g in graphs],
+        [g.y_raw[0, 0].item() for g in snapshot_graphs(tiny_files[1], SETTINGS, run_id=0)[::3]],
+    )
+    # a prediction reads every snapshot it is given, whatever the training thinning
+    assert len(snapshot_graphs(tiny_files[1], every, run_id=0, training=False)) == len(strain)
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(InputError, match="graph.snapshot_every"):
+            GraphSettings(snapshot_every=bad)
 
 
 def test_dataset_cache_is_keyed_by_settings(tiny_files, tmp_path):

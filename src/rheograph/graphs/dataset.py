@@ -56,6 +56,9 @@ class GraphSettings:
     # rheograph.graphs.features.GRAPH_INPUTS)
     graph_inputs: tuple = ()
     min_strain: float = 1.0  # snapshots before this strain (start-up transient) are skipped
+    # > 1: only every k-th of a trajectory's training snapshots (after min_strain): consecutive snapshots
+    # of a large box are strongly correlated, and each costs a relaxation when relax_strain is set
+    snapshot_every: int = 1
     viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
     pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
     # the model learns Pi in units of the imposed stress (SurrogateModule): needs log_stress as an input
@@ -145,6 +148,12 @@ class GraphSettings:
                     "graph.noise_range: re-noised positions have no contact history; drop "
                     f"{sorted(set(self.edge_features) & set(HISTORY_EDGE_FEATURES))} from graph.edge_features"
                 )
+        if isinstance(self.snapshot_every, bool) or not (
+            isinstance(self.snapshot_every, int) and self.snapshot_every >= 1
+        ):
+            raise InputError(
+                f"graph.snapshot_every={self.snapshot_every!r} is invalid: allowed an integer >= 1"
+            )
         if self.noise_copies < 0 or (self.noise_copies and not self.noise_range):
             raise InputError(
                 f"graph.noise_copies={self.noise_copies} is invalid: allowed 0, or >= 1 with "
@@ -241,6 +250,7 @@ def snapshot_graphs(
         strain = np.nan_to_num(snaps.strain, nan=-np.inf)
         # an arrested packing is a state of its own, not a start-up transient: kept at any strain
         keep = np.flatnonzero(((strain >= settings.min_strain) | snaps.jammed) & finite)
+        keep = keep[:: settings.snapshot_every]
     else:
         keep = np.arange(len(snaps))
     contacts = [None] * keep.size
