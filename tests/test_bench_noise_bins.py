@@ -1,0 +1,49 @@
+"""bench/noise_bins.py on a tiny run trained on noisy copies: every row lands in exactly one ε bin, the
+bins' scores are those of the rows in them, and the lookup does not depend on the noise."""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import load_bench_script, train_tiny_fold
+
+
+def test_noise_bins_score_the_saved_test_rows_of_each_noise_level(tiny_files, tmp_path, capsys):
+    from rheograph.learn.module import fold_metrics
+    from rheograph.naming import state_point_key
+
+    run_dir = train_tiny_fold(
+        tiny_files,
+        tmp_path,
+        "graph=imaging_relaxed",
+        "graph.noise_copies=3",
+        "data.split=grouped",
+    )
+    bench = load_bench_script("noise_bins")
+    cache = str(tmp_path / "cache")
+    rows = bench.fold_rows(run_dir, 0, tmp_path / "cache")
+    # 3 copies of every test snapshot, each copy's eps inside the trained range
+    assert rows["eps"].size == rows["true"].shape[0] and rows["eps"].size % 3 == 0
+    assert np.all((rows["eps"] >= 1e-4 * (1 - 1e-6)) & (rows["eps"] <= 0.05 * (1 + 1e-6)))
+    edges = [1e-4, 3e-3, 5e-2]
+    assert bench.main([str(run_dir), "--folds", "0", "--bins", *map(str, edges), "--cache-dir", cache,
+                       "--no-write"]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    low = rows["eps"] < edges[1]
+    counts = re.findall(r"\(n (\d+)\)", text)
+    assert [int(c) for c in counts] == [int(low.sum()), int((~low).sum())]
+    # the network's R² log eta_r in the low bin is that of the rows in it
+    groups = state_point_key(rows["phi"], rows["stress"])
+    expected = fold_metrics(rows["pred"][low], rows["true"][low], groups[low], rows["jammed"][low])
+    line = next(s for s in text.splitlines() if s.startswith("| graph network | R² log η_r"))
+    assert float(line.split("|")[3]) == pytest.approx(expected["r2_log_eta"], abs=6e-4)
+    # bad bins end in one line
+    with pytest.raises(SystemExit, match="increasing"):
+        bench.main([str(run_dir), "--bins", "0.01", "0.001", "--no-write"])
+
+
+def test_noise_bins_refuse_a_run_without_noisy_copies(tiny_files, tmp_path):
+    run_dir = train_tiny_fold(tiny_files, tmp_path, "data.split=grouped")
+    bench = load_bench_script("noise_bins")
+    with pytest.raises(SystemExit, match="bench/snapshot_noise.py"):
+        bench.main([str(run_dir), "--folds", "0", "--cache-dir", str(tmp_path / "cache"), "--no-write"])
