@@ -349,3 +349,19 @@ def test_a_snapshot_whose_relaxation_runs_out_of_steps_is_flagged(monkeypatch):
     table = rheograph.load_model("N400_phi0.76_imaging").predict(**values)
     assert table["in_domain"][0] == 0
     assert "of its 0.01 strain within its step budget in 1 snapshot(s)" in table["notes"][0]
+
+
+def test_a_snapshot_of_another_system_size_is_flagged_and_names_the_model_trained_at_it():
+    import rheograph
+
+    path = ROOT_DATA / "N2000_phi0.76_s10_seed1_d0.002_implicit" / "trajectory.h5"
+    snaps = read_snapshots(path)
+    values = dict(
+        positions=snaps.positions[-1], radii=snaps.radii, box=(snaps.lx, snaps.ly),
+        le_offset=snaps.le_offset[-1], stress=snaps.stress, phi=snaps.phi, mu=0.5, kn_coefficient=2e4,
+        kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5,
+    )  # fmt: skip
+    table = rheograph.load_model("N400_phi0.76").predict(**values)
+    assert table["in_domain"][0] == 0
+    assert "N = 2000 not among the trained N [400] (use N2000_phi0.76)" in table["notes"][0]
+    assert rheograph.load_model("N2000_phi0.76").predict(**values)["in_domain"][0] == 1
