@@ -149,10 +149,11 @@ def domain_report(
     if snaps.n_particles not in domain["n_particles"]:
         reasons.append(f"N = {snaps.n_particles} not among the trained N {domain['n_particles']}")
     noise = snaps.position_noise or 0.0
-    if reasons:  # the shipped models whose domain holds this snapshot's (phi, N) and precision
+    elsewhere = [r for r in reasons if r.startswith(("phi", "N ="))]
+    if elsewhere:  # name the shipped models whose domain holds this snapshot's (phi, N) and precision
         others = models_for_noise(snaps.phi, snaps.n_particles, noise)
         if others:
-            reasons[-1] += f" (use {' or '.join(others)})"
+            reasons[reasons.index(elsewhere[-1])] += f" (use {' or '.join(others)})"
     reason = noise_reason(domain, noise)
     if reason:
         reason = noise_reason(domain, noise, models_for_noise(snaps.phi, snaps.n_particles, noise))
