@@ -73,9 +73,34 @@ def fold_rows(run_dir: Path, k: int, cache_dir: Path) -> dict:
     return {"eps": eps, **saved}
 
 
-def main(argv=None) -> int:
+def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
+    """Markdown table lines: every saved predictor's metrics within each ε bin of ``rows``."""
     from rheograph.learn.module import fold_metrics
     from rheograph.naming import state_point_key
+
+    where = np.digitize(rows["eps"], edges) - 1
+    groups = state_point_key(rows["phi"], rows["stress"])
+    counts = [int(np.sum(where == b)) for b in range(len(labels))]
+    header = " | ".join(f"ε {label} (n {n})" for label, n in zip(labels, counts))
+    lines = [f"| predictor | metric | {header} |", "|---|---|" + "---|" * len(labels)]
+    for key, name in PREDICTORS:
+        if key not in rows:
+            continue
+        scores = []
+        for b in range(len(labels)):
+            inside = where == b
+            scores.append(
+                fold_metrics(rows[key][inside], rows["true"][inside], groups[inside], rows["jammed"][inside])
+                if inside.sum() > 2
+                else None
+            )
+        for metric, label in METRICS:
+            cells = " | ".join("–" if s is None else f"{s[metric]:.3f}" for s in scores)
+            lines.append(f"| {name} | {label} | {cells} |")
+    return lines
+
+
+def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", help="training run directories (fold*.pt, fold*_predictions.npz)")
@@ -115,29 +140,12 @@ def main(argv=None) -> int:
         run_dir = Path(run)
         folds = [fold_rows(run_dir, k, Path(args.cache_dir)) for k in args.folds]
         rows = {key: np.concatenate([f[key] for f in folds]) for key in folds[0] if np.ndim(folds[0][key])}
-        where = np.digitize(rows["eps"], edges) - 1
-        groups = state_point_key(rows["phi"], rows["stress"])
-        counts = [int(np.sum(where == b)) for b in range(len(labels))]
-        header = " | ".join(f"ε {label} (n {n})" for label, n in zip(labels, counts))
-        lines += [f"**{run_dir.name}**", "", f"| predictor | metric | {header} |"]
-        lines.append("|---|---|" + "---|" * len(labels))
-        for key, name in PREDICTORS:
-            if key not in rows:
-                continue
-            scores = []
-            for b in range(len(labels)):
-                inside = where == b
-                scores.append(
-                    fold_metrics(
-                        rows[key][inside], rows["true"][inside], groups[inside], rows["jammed"][inside]
-                    )
-                    if inside.sum() > 2
-                    else None
-                )
-            for metric, label in METRICS:
-                cells = " | ".join("–" if s is None else f"{s[metric]:.3f}" for s in scores)
-                lines.append(f"| {name} | {label} | {cells} |")
-        lines.append("")
+        phis = np.unique(np.round(rows["phi"], 6))
+        # a model pooled over area fractions: one table per phi (pooled R² would mostly score phi)
+        for phi in phis:
+            at = np.isclose(rows["phi"], phi)
+            title = f"**{run_dir.name}**" + (f", φ = {phi:g}" if len(phis) > 1 else "")
+            lines += [title, "", *bin_table({k: v[at] for k, v in rows.items()}, edges, labels), ""]
     lines.append(f"Command: `{command_line('noise_bins.py', argv)}`")
     publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
     return 0
