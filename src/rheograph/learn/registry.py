@@ -215,7 +215,8 @@ def card_markdown(card: dict) -> str:
             [
                 "On noisy copies of the test trajectories (noise log-uniform over the trained range, "
                 "several copies per snapshot, every predictor on the same copies); by noise level: "
-                "the project's results page (`python bench/snapshot_noise.py`).",
+                "`python bench/noise_bins.py` on the training run named below (these rows split by "
+                "their noise) and the project's results page.",
                 "",
             ]
             if isinstance(card["position_noise"], list)
