@@ -95,7 +95,8 @@ def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
                 else None
             )
         for metric, label in METRICS:
-            cells = " | ".join("–" if s is None else f"{s[metric]:.3f}" for s in scores)
+            digits = 4 if metric.startswith("r2") else 3  # R² near 1: the fourth decimal decides
+            cells = " | ".join("–" if s is None else f"{s[metric]:.{digits}f}" for s in scores)
             lines.append(f"| {name} | {label} | {cells} |")
     return lines
 
