@@ -37,6 +37,14 @@ def test_noise_bins_score_the_saved_test_rows_of_each_noise_level(tiny_files, tm
     expected = fold_metrics(rows["pred"][low], rows["true"][low], groups[low], rows["jammed"][low])
     line = next(s for s in text.splitlines() if s.startswith("| graph network | R² log η_r"))
     assert float(line.split("|")[3]) == pytest.approx(expected["r2_log_eta"], abs=6e-4)
+    # --skip-stress leaves out every row at that stress, and only those; nothing left is an error
+    stresses = np.unique(rows["stress"])
+    skip = ["--folds", "0", "--bins", "1e-4", "0.05", "--cache-dir", cache, "--no-write", "--skip-stress"]
+    assert bench.main([str(run_dir), *skip, "12345"]) == 0  # a stress no row has: every row kept
+    kept = re.findall(r"\(n (\d+)\)", capsys.readouterr().out)
+    assert [int(c) for c in kept] == [rows["stress"].size]
+    with pytest.raises(SystemExit, match="leaves no rows"):
+        bench.main([str(run_dir), *skip, *map(str, stresses)])
     # bad bins end in one line
     with pytest.raises(SystemExit, match="increasing"):
         bench.main([str(run_dir), "--bins", "0.01", "0.001", "--no-write"])
