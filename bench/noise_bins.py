@@ -104,7 +104,6 @@ def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
 
 
 def main(argv=None) -> int:
-
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", help="training run directories (fold*.pt, fold*_predictions.npz)")
     ap.add_argument(
