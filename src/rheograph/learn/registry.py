@@ -60,6 +60,12 @@ def read_card(paths: list[Path]) -> dict | None:
 
 
 # ---- making a shipped model ----------------------------------------------------------------------
+# the graph inputs computed from physics, and what each is
+COMPUTED_INPUTS = {
+    "solve_viscosity": "the η_r of one resistance solve at the imposed stress",
+    "frictional_coordination": "the CLM's frictional contacts counted",
+    "spring_pressure": "the contact-spring sum of the particle pressure",
+}
 def _complete_bundle(bundle: dict, split_file: Path) -> dict:
     """A bundle with the suspension record of its training data (bundles of older runs lack it): the
     split file lists every run of the training run's dataset, one suspension."""
@@ -145,9 +151,7 @@ def _noise_text(card: dict) -> str:
 
 def card_markdown(card: dict) -> str:
     d = card["domain"]
-    computed = [
-        x for x in card["graph"]["graph_inputs"] if x in ("solve_viscosity", "frictional_coordination")
-    ]
+    computed = [x for x in card["graph"]["graph_inputs"] if x in COMPUTED_INPUTS]
     lines = [
         f"# Model card: {card['name']}",
         "",
@@ -172,16 +176,17 @@ def card_markdown(card: dict) -> str:
     if computed:
         lines.append(
             "* Computed graph inputs: "
-            + ", ".join(f"`{x}`" for x in computed)
-            + " — the η_r of one resistance solve at the imposed stress and the CLM's frictional "
-            "contacts counted"
-            + (" (Z_μ is learned as a correction to the count)" if card["graph"].get("z_mu_on_count") else "")
-            + (
-                " (η_r is learned as a correction to the one-solve value)"
-                if card["graph"].get("viscosity_on_solve")
-                else ""
-            )
+            + "; ".join(f"`{x}` ({COMPUTED_INPUTS[x]})" for x in computed)
             + "."
+            + "".join(
+                f" {target} is learned as a correction to {reference}."
+                for flag, target, reference in (
+                    ("viscosity_on_solve", "η_r", "the one-solve value"),
+                    ("pressure_on_spring", "Π", "the spring sum"),
+                    ("z_mu_on_count", "Z_μ", "the count"),
+                )
+                if card["graph"].get(flag)
+            )
         )
     graph = card["graph"]
     if graph.get("relax_strain"):
@@ -204,7 +209,13 @@ def card_markdown(card: dict) -> str:
     if card.get("on_state_mean"):
         lines.append(
             "* Each target is learned as the deviation from the training folds' mean at the snapshot's "
-            "(φ, σ): where a snapshot says little, the prediction falls back on that lookup."
+            "(φ, σ): where a snapshot says little, the prediction falls back on that lookup"
+            + (
+                " (for η_r, learned as a correction to the one-solve value: that value times the mean "
+                "correction at (φ, σ))."
+                if card["graph"].get("viscosity_on_solve")
+                else "."
+            )
         )
     lines += [
         "* Learned: the message-passing network and its head (η_r, Π, Z_μ).",
