@@ -189,29 +189,36 @@ def wyart_cates(f, phi_0, phi_mu):
     return f * phi_mu + (1.0 - f) * phi_0
 
 
-def fit_wyart_cates(phi, f, eta, beta: float | None = 2.0) -> dict:
+def fit_wyart_cates(phi, f, eta, beta: float | None = 2.0, prefactor_in_f: bool = False) -> dict:
     """Least squares in log eta_r of eta_r = A (1 - phi / phi_m(f))^(-beta), phi_m of ``wyart_cates``
-    (beta fitted when None)."""
+    (beta fitted when None).  With ``prefactor_in_f`` the prefactor interpolates between the two
+    branches like the jamming fraction, log A = (1 - f) log A_0 + f log A_mu: the frictionless and the
+    frictional divergences need not share an amplitude."""
     phi, f, log_eta = (np.asarray(v, float) for v in (phi, f, eta))
     log_eta = np.log(log_eta)
+    n_log_a = 2 if prefactor_in_f else 1
 
     def residual(x):
         phi_m = wyart_cates(f, x[0], x[1])
         gap = np.maximum(1.0 - phi / phi_m, 1e-9)
-        b = beta if beta is not None else x[3]
-        return log_eta - (x[2] + -b * np.log(gap))
+        log_a = x[2] + (x[3] - x[2]) * f if prefactor_in_f else x[2]
+        b = beta if beta is not None else x[2 + n_log_a]
+        return log_eta - (log_a - b * np.log(gap))
 
-    x0 = [0.84, 0.80, 0.0] + ([2.0] if beta is None else [])
-    lower = [0.5, 0.5, -np.inf] + ([0.1] if beta is None else [])
-    upper = [1.0, 1.0, np.inf] + ([10.0] if beta is None else [])
+    x0 = [0.84, 0.80] + [0.0] * n_log_a + ([2.0] if beta is None else [])
+    lower = [0.5, 0.5] + [-np.inf] * n_log_a + ([0.1] if beta is None else [])
+    upper = [1.0, 1.0] + [np.inf] * n_log_a + ([10.0] if beta is None else [])
     fit = least_squares(residual, x0, bounds=(lower, upper))
-    return {
+    out = {
         "phi_j0": float(fit.x[0]),
         "phi_jmu": float(fit.x[1]),
         "prefactor": float(np.exp(fit.x[2])),
-        "beta": float(beta if beta is not None else fit.x[3]),
+        "beta": float(beta if beta is not None else fit.x[2 + n_log_a]),
         "rms_log": float(np.sqrt(np.mean(fit.fun**2))),
     }
+    if prefactor_in_f:
+        out["prefactor_mu"] = float(np.exp(fit.x[3]))
+    return out
 
 
 def bootstrap(runs: list[dict], fit, keys, rng, n_boot: int = BOOTSTRAP) -> dict:
@@ -328,14 +335,15 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                 )
         everything = [r for r in runs if r["n"] == n and flowing(r) and np.isfinite(r["z_mu"]) and r["z"] > 0]
         if len({r["phi"] for r in everything}) >= 3 and any(r["z_mu"] > 0 for r in everything):
-            for beta in (2.0, None):
+            for beta, per_branch in ((2.0, False), (None, False), (None, True)):
 
-                def wc(sample, b=beta):
+                def wc(sample, b=beta, p=per_branch):
                     return fit_wyart_cates(
                         [r["phi"] for r in sample],
                         [r["z_mu"] / r["z"] for r in sample],
                         [r["eta"] for r in sample],
                         b,
+                        prefactor_in_f=p,
                     )
 
                 fit = wc(everything)
@@ -345,7 +353,9 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                         {
                             "n": n,
                             "quantity": name,
-                            "method": "Wyart–Cates, f = Z_mu / Z, " + ("beta = 2" if beta else "beta fitted"),
+                            "method": "Wyart–Cates, f = Z_mu / Z, "
+                            + ("log A linear in f, " if per_branch else "")
+                            + ("beta = 2" if beta else "beta fitted"),
                             "data": "every flowing state point",
                             "trajectories": len(everything),
                             "phi_range": (
@@ -420,10 +430,10 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
             if pts:
                 p, s = np.array(pts).T
                 ax.scatter(p, s, marker=marker, color=color, s=22, label=label, alpha=0.6)
-        # the Wyart-Cates fit with beta fitted, and the branch divergences (beta fitted) beside it
-        fit = next(
-            (r["wyart_cates"] for r in rows if r["n"] == n and "wyart_cates" in r and r["beta_ci"]), None
-        )
+        # the Wyart-Cates fit (beta fitted) that fits best, and the branch divergences (beta fitted)
+        candidates = [r for r in rows if r["n"] == n and "wyart_cates" in r and r["beta_ci"]]
+        best = min(candidates, key=lambda r: r["rms_log"]) if candidates else None
+        fit = best["wyart_cates"] if best else None
         if fit:
             stresses = sorted({r["stress"] for r in frictional if flowing(r)})
             f = [
@@ -434,7 +444,8 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
                 wyart_cates(np.array(f), fit["phi_j0"], fit["phi_jmu"]),
                 stresses,
                 "k-",
-                label=r"$\phi_m(f)$, Wyart–Cates ($\beta$ fitted)",
+                label=r"$\phi_m(f)$, Wyart–Cates"
+                + (r" ($\log A$ linear in $f$)" if "prefactor_mu" in fit else r" ($\beta$ fitted)"),
             )
         for quantity, style in (("phi_J^0", ":"), ("phi_J^mu", "--")):
             row = next(
