@@ -66,6 +66,8 @@ COMPUTED_INPUTS = {
     "frictional_coordination": "the CLM's frictional contacts counted",
     "spring_pressure": "the contact-spring sum of the particle pressure",
 }
+
+
 def _complete_bundle(bundle: dict, split_file: Path) -> dict:
     """A bundle with the suspension record of its training data (bundles of older runs lack it): the
     split file lists every run of the training run's dataset, one suspension."""
