@@ -479,9 +479,13 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
                 ax.plot(*_flow_curve(points, n, phi, mu, key), "-", color=colour, lw=1.5)
         labels = [("σ/σ0", "η_r"), ("γ̇/γ̇0", "η_r"), ("σ/σ0", "Π/σ0"), ("σ/σ0", "Z_μ")]
         for ax, (xl, yl) in zip(axes, labels):
-            ax.set_xscale("log")
             ax.set_xlabel(xl)
             ax.set_ylabel(yl)
+            # a size whose every run arrested has no flowing η_r to draw: its panels stay empty, and an
+            # empty axis cannot be log-scaled
+            if not _has_points(ax):
+                continue
+            ax.set_xscale("log")
             if yl != "Z_μ":
                 ax.set_yscale("log")
         axes[0].set_title(f"N = {n}", loc="left", fontsize=10)
@@ -490,6 +494,13 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _has_points(ax) -> bool:
+    """Whether an axis holds any drawn point (scatter or line)."""
+    return any(len(c.get_offsets()) for c in ax.collections) or any(
+        len(line.get_xdata()) for line in ax.get_lines()
+    )
 
 
 def plot_fig3(records: list[dict], path: Path) -> None:
