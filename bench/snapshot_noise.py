@@ -58,7 +58,7 @@ def relaxed(snaps, eps: float, strain: float, every: int, rng):
             snaps.ly,
             snaps.le_offset[idx],
         )
-        pos, offset, _ = relax_positions(
+        pos, offset, *_ = relax_positions(
             noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[idx], params, strain
         )
         positions.append(pos)

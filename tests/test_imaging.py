@@ -97,6 +97,22 @@ def test_noisy_graphs_redraw_fresh_noise_and_keep_targets(tiny_files):
         (dict(graph_inputs=("log_stress", "solve_viscosity")), "drop solve_viscosity"),
         (dict(edge_features=("gap", "sliding")), "contact history"),
         (dict(cutoff=0.2), "widest gap shell"),
+        (dict(graph_inputs=("log_stress", "relaxed_viscosity"), noise_copies=2), "relax_strain > 0"),
+        (
+            dict(graph_inputs=("position_noise", "relaxed_pressure"), noise_copies=2, relax_strain=0.01),
+            "log_stress",
+        ),
+        (dict(viscosity_on_relaxed=True, noise_copies=2, relax_strain=0.01), "add relaxed_viscosity"),
+        (
+            dict(
+                graph_inputs=("log_stress", "solve_viscosity", "relaxed_viscosity"),
+                viscosity_on_solve=True,
+                viscosity_on_relaxed=True,
+                noise_copies=2,
+                relax_strain=0.01,
+            ),
+            "set one of them to false",
+        ),
     ],
 )
 def test_imaging_settings_are_checked_by_name(change, message):
@@ -120,7 +136,7 @@ def test_a_short_shear_relaxes_the_overlaps_that_noise_creates(tiny_files):
         return snapshot_pairs(pos, snaps.radii, snaps.lx, snaps.ly, offset, 0.5, params)["overlap"].max()
 
     exact = largest_overlap(snaps.positions[k], snaps.le_offset[k])
-    relaxed, offset, reached = relax_positions(
+    relaxed, offset, reached, *_ = relax_positions(
         noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k], params, 0.05
     )
     # noise of 0.01 a makes overlaps of ~30x those the springs hold; a short stretch of the flow brings
@@ -133,12 +149,58 @@ def test_a_short_shear_relaxes_the_overlaps_that_noise_creates(tiny_files):
     assert 0.05 <= reached < 0.055 and reached * snaps.ly == pytest.approx(moved, rel=1e-9)
     # a step budget too short for the strain (as for an arrested packing, which creeps) stops there and
     # says how far it got
-    _, offset, reached = relax_positions(
+    _, offset, reached, *_ = relax_positions(
         noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k], params, 0.05, max_steps=3
     )
     assert 0 < reached < 0.05 and reached * snaps.ly == pytest.approx(
         (offset - snaps.le_offset[k]) % snaps.lx
     )
+
+
+def test_relaxation_observables_are_those_of_the_configuration_it_reaches(tiny_files):
+    from rheograph.graphs.features import solve_viscosity
+
+    snaps = read_snapshots(tiny_files[2])
+    params = {**snaps.graph_params(), **snaps.numerics}
+    k = len(snaps) - 1
+    pos, radii, lx, ly, offset = snaps.positions[k], snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[k]
+    # no strain to go: the observables are one resistance solve of the snapshot as given, springs
+    # unstretched — the one-solve's first pass, and the CLM count that the graph inputs make of it
+    still = relax_positions(pos, radii, lx, ly, offset, params, 0.0)
+    assert np.array_equal(still.positions, pos) and still.strain == 0.0
+    assert still.viscosity == solve_viscosity(pos, radii, lx, ly, offset, params, passes=1)
+    assert still.viscosity_early == still.viscosity
+    settings = GraphSettings(
+        edge_features=("gap",), graph_inputs=("log_stress", "frictional_coordination", "spring_pressure")
+    )
+    (graph,) = snapshot_graphs(
+        dataclasses.replace(
+            snaps,
+            positions=pos[None],
+            le_offset=offset[None],
+            strain=snaps.strain[[k]],
+            targets=snaps.targets[[k]],
+            jammed=snaps.jammed[[k]],
+            contacts=None,
+        ),
+        settings,
+        run_id=0,
+        training=False,
+    )
+    assert still.z_mu == pytest.approx(float(graph.u[0, 1]), abs=1e-12)
+    # with springs unstretched and gaps closing, Pi is the spring sum plus lubrication and dashpots: the
+    # springs carry most of it in a dense flow at sigma/sigma0 = 50
+    assert 0.5 < float(graph.physics[0, 1]) / still.pressure < 1.5
+    # a short stretch of flow from exact positions continues the run's own flow: the springs it loads
+    # bring eta_r back to the recorded value (here within 0.8 %, where the one-solve is 16 % high: the
+    # tangential springs the snapshot does not record), Pi within 0.5 %, Z_mu within two contacts of 64
+    relaxed = relax_positions(pos, radii, lx, ly, offset, params, 0.004)
+    assert 0.004 <= relaxed.strain < 0.006
+    eta, pressure, z_mu = snaps.targets[k]
+    assert abs(np.log(still.viscosity / eta)) > 0.1
+    assert abs(np.log(relaxed.viscosity / eta)) < 0.03
+    assert relaxed.pressure == pytest.approx(pressure, rel=0.03)
+    assert abs(relaxed.z_mu - z_mu) <= 4 / snaps.n_particles
 
 
 def test_noise_domain_of_exact_and_imaging_models():

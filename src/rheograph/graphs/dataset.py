@@ -22,6 +22,7 @@ from rheograph.graphs.features import (
     GRAPH_INPUTS,
     HISTORY_EDGE_FEATURES,
     PAPER_EDGE_FEATURES,
+    RELAXED_GRAPH_INPUTS,
     SHELL_INPUTS,
     SHELL_WIDTHS,
     STRESS_EDGE_FEATURES,
@@ -47,7 +48,7 @@ log = logging.getLogger("rheograph.graphs")
 class GraphSettings:
     """Everything that determines a graph and its targets (hashed into the cache directory name, except
     the options that only say how the model reads the targets: ``pressure_per_stress``,
-    ``z_mu_on_count``, ``viscosity_on_solve``, ``pressure_on_spring``)."""
+    ``z_mu_on_count``, ``viscosity_on_solve``, ``viscosity_on_relaxed``, ``pressure_on_spring``)."""
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = PAPER_EDGE_FEATURES
@@ -67,6 +68,9 @@ class GraphSettings:
     z_mu_on_count: bool = False
     # the model learns eta_r as a correction to the one-solve viscosity solve_viscosity (a graph input)
     viscosity_on_solve: bool = False
+    # the model learns eta_r as a correction to the relaxation's own eta_r relaxed_viscosity (a graph
+    # input; needs relax_strain)
+    viscosity_on_relaxed: bool = False
     # the model learns Pi / sigma as a correction to the contact-spring pressure spring_pressure (a graph
     # input); needs pressure_per_stress
     pressure_on_spring: bool = False
@@ -105,7 +109,9 @@ class GraphSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"graph.{name}={value} is invalid: allowed a finite value > 0")
-        computed = [name for name in self.graph_inputs if name in COMPUTED_GRAPH_INPUTS]
+        computed = [
+            name for name in self.graph_inputs if name in COMPUTED_GRAPH_INPUTS + RELAXED_GRAPH_INPUTS
+        ]
         if computed and "log_stress" not in self.graph_inputs:
             raise InputError(
                 f"graph.graph_inputs: {computed} are computed at the imposed stress, which the model "
@@ -120,6 +126,22 @@ class GraphSettings:
             raise InputError(
                 "graph.viscosity_on_solve=true learns eta_r as a correction to the one-solve viscosity: "
                 f"add solve_viscosity to graph.graph_inputs (now {list(self.graph_inputs)})"
+            )
+        if self.viscosity_on_relaxed and "relaxed_viscosity" not in self.graph_inputs:
+            raise InputError(
+                "graph.viscosity_on_relaxed=true learns eta_r as a correction to the relaxation's eta_r: "
+                f"add relaxed_viscosity to graph.graph_inputs (now {list(self.graph_inputs)})"
+            )
+        if self.viscosity_on_relaxed and self.viscosity_on_solve:
+            raise InputError(
+                "graph.viscosity_on_solve and graph.viscosity_on_relaxed each set the value eta_r is "
+                "learned as a correction to: set one of them to false"
+            )
+        relaxed_inputs = [name for name in self.graph_inputs if name in RELAXED_GRAPH_INPUTS]
+        if relaxed_inputs and not self.relax_strain:
+            raise InputError(
+                f"graph.graph_inputs: {relaxed_inputs} are measured while relaxing the snapshot: set "
+                "graph.relax_strain > 0 (e.g. 0.01) or drop them"
             )
         if self.pressure_on_spring and not (
             self.pressure_per_stress and "spring_pressure" in self.graph_inputs
@@ -271,6 +293,7 @@ def snapshot_graphs(
     # the strain each snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
     # that arrested within the step budget, which predictions flag
     relaxed = np.full(len(snaps), np.nan)
+    relaxations = [None] * len(snaps)
     if settings.relax_strain:
         if "disp_max" not in solve_params:
             raise InputError(
@@ -279,9 +302,10 @@ def snapshot_graphs(
             )
         positions, offsets = positions.copy(), offsets.copy()
         for idx in keep:
-            positions[idx], offsets[idx], relaxed[idx] = relax_positions(
+            relaxations[idx] = relax_positions(
                 positions[idx], radii, lx, ly, offsets[idx], solve_params, settings.relax_strain
             )
+            positions[idx], offsets[idx], relaxed[idx] = relaxations[idx][:3]
     return [
         snapshot_graph(
             positions[idx],
@@ -296,6 +320,7 @@ def snapshot_graphs(
             strain=float(snaps.strain[idx]),
             run_id=run_id,
             relaxed_strain=float(relaxed[idx]),
+            relaxation=relaxations[idx],
         )
         for k, idx in enumerate(keep)
     ]
@@ -314,11 +339,14 @@ def snapshot_graph(
     strain: float = np.nan,
     run_id: int = 0,
     relaxed_strain: float = np.nan,
+    relaxation=None,
 ) -> Data:
     """The graph of one snapshot: positions (N, 2) [a], radii (N,) [a], box = (lx, ly, le_offset) [a];
     ``params`` the run's parameter mapping (imposed ``stress`` included; with ``disp_max`` the one-solve
     is computed, else its input and physics row are NaN), ``conditions`` the snapshot's known ``phi``
-    and ``position_noise`` [a], ``targets`` (eta_r, Pi [sigma0], Z_mu) (NaN where unknown)."""
+    and ``position_noise`` [a], ``targets`` (eta_r, Pi [sigma0], Z_mu) (NaN where unknown),
+    ``relaxation`` the ``rheograph.graphs.features.Relaxation`` that produced ``positions`` (its
+    observables are the RELAXED_GRAPH_INPUTS)."""
     lx, ly, le_offset = box
     stress = float(params["stress"])
     # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
@@ -338,6 +366,20 @@ def snapshot_graph(
     known["spring_pressure"] = float(forward_transform(2.0 * np.pi * descriptors[3], settings.pressure_scale))
     if set(settings.graph_inputs) & set(SHELL_INPUTS):
         known.update(shell_inputs(pairs, radii.size))
+    if relaxation is not None:
+        known["relaxed_viscosity"] = float(forward_transform(relaxation.viscosity, settings.viscosity_scale))
+        known["relaxed_viscosity_early"] = float(
+            forward_transform(relaxation.viscosity_early, settings.viscosity_scale)
+        )
+        known["relaxed_pressure"] = float(
+            forward_transform(relaxation.pressure / stress, settings.pressure_scale)
+        )
+        known["relaxed_coordination"] = relaxation.z_mu
+    elif set(settings.graph_inputs) & set(RELAXED_GRAPH_INPUTS):
+        raise InputError(
+            f"graph inputs {sorted(set(settings.graph_inputs) & set(RELAXED_GRAPH_INPUTS))} are "
+            "measured while relaxing a snapshot, and this one was not relaxed (graph.relax_strain)"
+        )
     u = torch.tensor([[known[name] for name in settings.graph_inputs]], dtype=torch.float32)
     edge_attr = np.stack([feats[name] for name in settings.edge_features], axis=1)
     raw = np.asarray(targets, dtype=np.float64)
@@ -467,6 +509,7 @@ class SnapshotGraphDataset(InMemoryDataset):
                         "pressure_per_stress",
                         "z_mu_on_count",
                         "viscosity_on_solve",
+                        "viscosity_on_relaxed",
                         "pressure_on_spring",
                         # the cache holds the exact graphs; the noise is drawn when they are read
                         *(() if settings.noise_copies else ("noise_range",)),

@@ -41,13 +41,15 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
+from typing import NamedTuple
 
 import numpy as np
 
 from rheograph.errors import InputError
 from rheograph.sim.contacts import SLIDE
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
-from rheograph.sim.integrator import SimState, Simulation
+from rheograph.sim.integrator import SimState, Simulation, particle_pressure
 from rheograph.sim.params import SimParams
 
 PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
@@ -230,7 +232,22 @@ def node_features(radii, size_ratio):
 # positions and sigma fix exactly (tests/test_learning.py), not something to learn — and spring_pressure,
 # the contact-spring pressure per imposed stress (2 pi / A) sum r a_bar overlap / delta_sigma on the Pi
 # target's asinh scale: with k_n proportional to sigma it is what positions fix of Pi / sigma.
+# A relaxed snapshot (relax_positions) adds what the relaxation itself measured (RELAXED_GRAPH_INPUTS): the
+# instantaneous eta_r of its last step (``relaxed_viscosity``) and of its first step past a quarter of the
+# strain (``relaxed_viscosity_early``), both on the eta_r target's asinh scale, the particle pressure per
+# imposed stress of its last step (``relaxed_pressure``, on the Pi target's asinh scale) and its counted
+# frictional contacts (``relaxed_coordination``, 2 x frictional / N).  Unlike the one-solve, whose
+# tangential springs start unstretched, these steps carry the springs the relaxation has loaded: at
+# phi = 0.76, N = 400, after noise of 0.001 a and a 0.01 strain, the last step's eta_r alone scores R^2
+# log eta_r 0.98 against the snapshot's own (the one-solve of the same relaxed positions: 0.96), and on
+# exact positions the early one 0.999 (docs/benchmarks.md, "What the relaxation measures").
 COMPUTED_GRAPH_INPUTS = ("solve_viscosity", "frictional_coordination", "spring_pressure")
+RELAXED_GRAPH_INPUTS = (
+    "relaxed_viscosity",
+    "relaxed_viscosity_early",
+    "relaxed_pressure",
+    "relaxed_coordination",
+)
 
 # Structure that survives imprecise positions (the imaging inputs): pair statistics in gap shells
 # h < w whose widths w [a] reach above the position noise, instead of overlaps of ~1e-3 a.  Per shell:
@@ -245,7 +262,7 @@ SHELL_INPUTS = tuple(f"shell_{kind}_{w:g}" for w in SHELL_WIDTHS for kind in ("p
 # known conditions of a snapshot: log(sigma/sigma0), phi, and the RMS position error per coordinate [a]
 # (0 for simulator output; an experimenter's tracking precision)
 KNOWN_GRAPH_INPUTS = ("log_stress", "phi", "position_noise")
-GRAPH_INPUTS = (*KNOWN_GRAPH_INPUTS, *COMPUTED_GRAPH_INPUTS, *SHELL_INPUTS)
+GRAPH_INPUTS = (*KNOWN_GRAPH_INPUTS, *COMPUTED_GRAPH_INPUTS, *RELAXED_GRAPH_INPUTS, *SHELL_INPUTS)
 
 
 def shell_inputs(pairs: dict, n_particles: int) -> dict:
@@ -308,13 +325,35 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
 RELAX_MAX_STEPS = 4000
 
 
+def _viscosity(stress: float, shear_rate: float) -> float:
+    """eta_r = sigma / shear rate of a stress-controlled step; a packing that does not move at all has
+    none, and the (finite) largest float stands for it."""
+    return stress / shear_rate if shear_rate else math.copysign(np.finfo(np.float64).max, stress)
+
+
+class Relaxation(NamedTuple):
+    """What ``relax_positions`` returns: the relaxed ``positions`` (N, 2) [a], the Lees–Edwards
+    ``le_offset`` [a] and the ``strain`` reached, and the observables the relaxation measured on the way
+    (each a resistance solve at the imposed stress with the tangential springs it has loaded):
+    ``viscosity`` eta_r [-], ``pressure`` Pi [sigma0] and ``z_mu`` (2 x frictional contacts / N) of the
+    relaxed configuration itself, and ``viscosity_early``, eta_r at the first step past a quarter of the
+    strain."""
+
+    positions: np.ndarray
+    le_offset: float
+    strain: float
+    viscosity: float
+    pressure: float
+    z_mu: float
+    viscosity_early: float
+
+
 def relax_positions(
     positions, radii, lx, ly, le_offset, params: dict, strain: float = 0.01, max_steps: int | None = None
-):
-    """(positions (N, 2) [a], Lees–Edwards offset [a], strain reached) after shearing a snapshot by
-    ``strain`` under the run's own dynamics at its imposed stress (``params`` as for ``solve_viscosity``,
-    disp_max included), or as far as ``max_steps`` (default ``RELAX_MAX_STEPS``) steps take an arrested
-    packing (the strain reached then falls short, and callers flag it).
+) -> Relaxation:
+    """A snapshot sheared by ``strain`` under the run's own dynamics at its imposed stress (``params`` as
+    for ``solve_viscosity``, disp_max included), or as far as ``max_steps`` (default ``RELAX_MAX_STEPS``)
+    steps take an arrested packing (the strain reached then falls short, and callers flag it).
 
     A projection of an imprecise configuration onto one the contact model can hold: Gaussian position
     noise of eps creates overlaps of ~eps, far beyond the ~delta_sigma = 9e-4 a the springs sustain at
@@ -336,11 +375,25 @@ def relax_positions(
             le_offset=le_offset,
         ),
     )
+    viscosity_early = math.nan
     for _ in range(RELAX_MAX_STEPS if max_steps is None else max_steps):
         if sim.state.strain >= strain:
             break
-        sim.step()
-    return sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)
+        result = sim.step()
+        if math.isnan(viscosity_early) and sim.state.strain >= 0.25 * strain:
+            viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
+    relaxed = sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)
+    # the observables of the relaxed configuration: one more solve, whose move is discarded
+    result = sim.step(record=True)
+    if math.isnan(viscosity_early):  # a creeping packing short of a quarter of the strain
+        viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
+    return Relaxation(
+        *relaxed,
+        viscosity=_viscosity(sim_params.stress, result.shear_rate),
+        pressure=particle_pressure(result),
+        z_mu=2.0 * result.n_frictional / sim.state.radii.size,
+        viscosity_early=viscosity_early,
+    )
 
 
 # ---- target transforms ---------------------------------------------------------------------------

@@ -323,10 +323,11 @@ class SurrogateModule(L.LightningModule):
     With ``z_mu_input`` >= 0 (the column of the graph inputs u holding the counted frictional
     coordination) the network learns Z_mu minus that count: with the CLM the count is Z_mu itself, so the
     network only has to learn (close to) nothing instead of copying an input through its head.  Likewise
-    ``viscosity_input`` >= 0 (the column holding the one-solve viscosity, transformed like the eta_r
-    target): the network learns the correction to it, which the contact history sets (|log10 ratio|
-    <= 0.16 with a within-state spread <= 0.08 at phi <= 0.78, against 1.3 decades of eta_r), so a model
-    that meets a new area fraction extrapolates a small correction rather than eta_r itself.  And
+    ``viscosity_input`` >= 0 (the column holding the one-solve viscosity, or the relaxed configuration's,
+    transformed like the eta_r target): the network learns the correction to it, which for the
+    one-solve the contact history sets (|log10 ratio| <= 0.16 with a within-state spread <= 0.08 at
+    phi <= 0.78, against 1.3 decades of eta_r), so a model that meets a new area fraction extrapolates
+    a small correction rather than eta_r itself.  And
     ``pressure_input`` >= 0 (the column holding the contact-spring pressure per stress, on the Pi
     target's asinh scale; needs ``pressure_per_stress``): the network learns Pi / sigma minus it, the
     lubrication and dashpot parts and what the springs' sum misses.

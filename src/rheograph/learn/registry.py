@@ -65,6 +65,10 @@ COMPUTED_INPUTS = {
     "solve_viscosity": "the η_r of one resistance solve at the imposed stress",
     "frictional_coordination": "the CLM's frictional contacts counted",
     "spring_pressure": "the contact-spring sum of the particle pressure",
+    "relaxed_viscosity": "the η_r of the relaxed configuration, with the springs the relaxation loaded",
+    "relaxed_viscosity_early": "the η_r a quarter of the way through the relaxation",
+    "relaxed_pressure": "the particle pressure of the relaxed configuration",
+    "relaxed_coordination": "the frictional contacts of the relaxed configuration",
 }
 
 
@@ -184,6 +188,7 @@ def card_markdown(card: dict) -> str:
                 f" {target} is learned as a correction to {reference}."
                 for flag, target, reference in (
                     ("viscosity_on_solve", "η_r", "the one-solve value"),
+                    ("viscosity_on_relaxed", "η_r", "the relaxed configuration's value"),
                     ("pressure_on_spring", "Π", "the spring sum"),
                     ("z_mu_on_count", "Z_μ", "the count"),
                 )
@@ -216,6 +221,9 @@ def card_markdown(card: dict) -> str:
                 " (for η_r, learned as a correction to the one-solve value: that value times the mean "
                 "correction at (φ, σ))."
                 if card["graph"].get("viscosity_on_solve")
+                else " (for η_r, learned as a correction to the relaxed configuration's value: that "
+                "value times the mean correction at (φ, σ))."
+                if card["graph"].get("viscosity_on_relaxed")
                 else "."
             )
         )

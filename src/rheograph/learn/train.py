@@ -130,7 +130,11 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         state_mean_by_stress=settings.stress_known,
         z_mu_input=(settings.graph_inputs.index("frictional_coordination") if settings.z_mu_on_count else -1),
         viscosity_input=(
-            settings.graph_inputs.index("solve_viscosity") if settings.viscosity_on_solve else -1
+            settings.graph_inputs.index("solve_viscosity")
+            if settings.viscosity_on_solve
+            else settings.graph_inputs.index("relaxed_viscosity")
+            if settings.viscosity_on_relaxed
+            else -1
         ),
         pressure_input=(
             settings.graph_inputs.index("spring_pressure") if settings.pressure_on_spring else -1
@@ -352,6 +356,7 @@ NEUTRAL_LATER_OPTIONS = (
     ("model", "global_mixing", "none"),
     ("graph", "z_mu_on_count", False),
     ("graph", "viscosity_on_solve", False),
+    ("graph", "viscosity_on_relaxed", False),
 )
 
 
