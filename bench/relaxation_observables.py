@@ -36,7 +36,7 @@ def relaxation_path(path: str, every: int, noises, max_strain: float, solve_at: 
     """Rows (stress, eps, recorded (eta, Pi, Z_mu), strains (S,), eta (S,), Pi (S,), Z_mu (S,), one-solve
     eta at ``solve_at``) for every ``every``-th flowing snapshot of ``path`` at strain >= 1."""
     from rheograph.graphs.features import solve_viscosity
-    from rheograph.io.snapshots import read_snapshots, wrap_into_box
+    from rheograph.io.snapshots import noisy_positions, read_snapshots
     from rheograph.sim.integrator import SimState, Simulation, particle_pressure
     from rheograph.sim.params import SimParams
 
@@ -47,12 +47,7 @@ def relaxation_path(path: str, every: int, noises, max_strain: float, solve_at: 
     rows = []
     for k in np.flatnonzero((snaps.strain >= 1.0) & ~snaps.jammed)[::every]:
         for eps in noises:
-            noisy = wrap_into_box(
-                snaps.positions[k] + rng.normal(0.0, eps, snaps.positions[k].shape),
-                snaps.lx,
-                snaps.ly,
-                snaps.le_offset[k],
-            )
+            noisy = noisy_positions(snaps, k, eps, rng)
             sim = Simulation(
                 sim_params,
                 SimState(
@@ -112,6 +107,10 @@ def main(argv=None) -> int:
     ap.add_argument("--section", default="relaxation_observables")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
+    if not 0.0 <= args.solve_at < max(args.strains):
+        raise SystemExit(
+            f"--solve-at {args.solve_at:g} must lie in [0, the largest --strains {max(args.strains):g})"
+        )
     paths = sorted(glob.glob(args.trajectories))
     if not paths:
         raise SystemExit(f"no trajectory matches {args.trajectories}")

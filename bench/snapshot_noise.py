@@ -46,18 +46,13 @@ def relaxed(snaps, eps: float, strain: float, every: int, rng):
     import dataclasses
 
     from rheograph.graphs.features import relax_positions
-    from rheograph.io.snapshots import wrap_into_box
+    from rheograph.io.snapshots import noisy_positions
 
     keep = np.arange(0, len(snaps), every)
     params = {**snaps.graph_params(), **snaps.numerics}
     positions, offsets = [], []
     for idx in keep:
-        noisy = wrap_into_box(
-            snaps.positions[idx] + rng.normal(0.0, eps, snaps.positions[idx].shape),
-            snaps.lx,
-            snaps.ly,
-            snaps.le_offset[idx],
-        )
+        noisy = noisy_positions(snaps, idx, eps, rng)
         pos, offset, *_ = relax_positions(
             noisy, snaps.radii, snaps.lx, snaps.ly, snaps.le_offset[idx], params, strain
         )

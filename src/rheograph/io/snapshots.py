@@ -98,6 +98,17 @@ def wrap_into_box(positions: np.ndarray, lx: float, ly: float, le_offset: float)
     return out
 
 
+def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generator) -> np.ndarray:
+    """Snapshot ``k``'s positions (N, 2) [a] plus Gaussian noise of ``eps`` [a] per coordinate drawn from
+    ``rng``, wrapped into the box (an imaging-grade copy of it)."""
+    return wrap_into_box(
+        snaps.positions[k] + rng.normal(0.0, eps, snaps.positions[k].shape),
+        snaps.lx,
+        snaps.ly,
+        snaps.le_offset[k],
+    )
+
+
 def area_fraction(radii, lx: float, ly: float) -> float:
     return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
 
