@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 from conftest import tiny_training_overrides
 
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
@@ -115,6 +116,38 @@ def test_a_corrupt_graph_cache_entry_is_rebuilt(tiny_files, tmp_path, caplog):
     assert len(again) == len(first)
     assert (again[0].edge_attr == first[0].edge_attr).all()
     assert any("unreadable" in r.message and "rebuilding" in r.message for r in caplog.records)
+
+
+def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp_path, monkeypatch):
+    """A build killed after its first file (one part written, one half-written) rebuilds only what it
+    had not finished, and the set is the same graphs as an uninterrupted build's."""
+    settings = GraphSettings(min_strain=0.05)
+    whole = SnapshotGraphDataset(tiny_files, settings, tmp_path / "whole")
+    built = []
+    original = SnapshotGraphDataset._file_graphs
+
+    def killed_after_the_first(self, run_id, path):
+        built.append(run_id)
+        if run_id == 1:
+            Path(self.root, "parts", "1.pt").write_bytes(b"half a part")
+            raise KeyboardInterrupt
+        return original(self, run_id, path)
+
+    monkeypatch.setattr(SnapshotGraphDataset, "_file_graphs", killed_after_the_first)
+    with pytest.raises(KeyboardInterrupt):
+        SnapshotGraphDataset(tiny_files, settings, tmp_path / "killed")
+    assert built == [0, 1]
+    built.clear()
+    monkeypatch.setattr(
+        SnapshotGraphDataset,
+        "_file_graphs",
+        lambda self, run_id, path: built.append(run_id) or original(self, run_id, path),
+    )
+    resumed = SnapshotGraphDataset(tiny_files, settings, tmp_path / "killed")
+    assert built == list(range(1, len(tiny_files)))
+    assert len(resumed) == len(whole) and not Path(resumed.root, "parts").exists()
+    for a, b in zip(resumed, whole):
+        assert torch.equal(a.edge_attr, b.edge_attr) and int(a.run_id) == int(b.run_id)
 
 
 def test_debug_flag_shows_the_traceback(tmp_path):

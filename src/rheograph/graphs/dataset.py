@@ -8,6 +8,7 @@ import json
 import logging
 import math
 import os
+import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -549,17 +550,39 @@ class SnapshotGraphDataset(InMemoryDataset):
         pass
 
     def process(self):
+        # one part per trajectory file, kept until the whole set is saved: a build that relaxes or
+        # solves every snapshot runs for hours, and a killed one resumes from the files it finished
+        parts = Path(self.root, "parts")
+        parts.mkdir(parents=True, exist_ok=True)
         graphs = []
         for run_id, path in enumerate(self.files):
-            snaps = read_snapshots(path, self.lfdem_params)
-            if not self.settings.noise_copies:
-                graphs.extend(snapshot_graphs(snaps, self.settings, run_id))
-                continue
-            log.info("noisy copies of %s (%d/%d)", path, run_id + 1, len(self.files))
-            for copy_id in range(self.settings.noise_copies):
-                noisy = noisy_copy(snaps, self.settings.noise_range, [run_id, copy_id])
-                graphs.extend(snapshot_graphs(noisy, self.settings, run_id))
+            part = parts / f"{run_id}.pt"
+            try:
+                built = torch.load(part, weights_only=False) if part.exists() else None
+            except Exception as exc:  # a part killed mid-write: build it again
+                log.warning("graph cache part %s unreadable (%s): rebuilding it", part, exc)
+                built = None
+            if built is None:
+                built = self._file_graphs(run_id, path)
+                torch.save(built, part.with_suffix(".tmp"))
+                part.with_suffix(".tmp").replace(part)
+            else:
+                log.info("graphs of %s (%d/%d) from an earlier build", path, run_id + 1, len(self.files))
+            graphs.extend(built)
         if not graphs:
             raise InputError(f"no snapshots with strain >= {self.settings.min_strain} in {self.files}")
         self.save(graphs, self.processed_paths[0])
+        shutil.rmtree(parts)
         Path(self.root, "files.json").write_text(json.dumps(self.files, indent=1))
+
+    def _file_graphs(self, run_id: int, path: str) -> list:
+        """The graphs of one trajectory file (with its noisy copies when ``noise_copies`` is set)."""
+        snaps = read_snapshots(path, self.lfdem_params)
+        if not self.settings.noise_copies:
+            return snapshot_graphs(snaps, self.settings, run_id)
+        log.info("noisy copies of %s (%d/%d)", path, run_id + 1, len(self.files))
+        graphs = []
+        for copy_id in range(self.settings.noise_copies):
+            noisy = noisy_copy(snaps, self.settings.noise_range, [run_id, copy_id])
+            graphs.extend(snapshot_graphs(noisy, self.settings, run_id))
+        return graphs
