@@ -66,6 +66,9 @@ cards: install
 	$(PY) -m rheograph.dataset_card data/jamming --out docs/datasets/jamming \
 	    --title "Dataset card: runs near jamming" \
 	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \
+	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.82,0.83,0.835 sim.seed=1,2" \
+	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.84 sim.relax_tolerance=3e-3 sim.seed=1,2" \
+	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.845 sim.relax_tolerance=2e-2 sim.seed=1,2" \
 	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1   # phi 0.79" \
 	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.785,0.795 sim.seed=1,2,3,4,5,6" \
 	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.79 sim.seed=4,5,6" \
