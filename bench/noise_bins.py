@@ -49,7 +49,7 @@ def fold_rows(run_dir: Path, k: int, cache_dir: Path) -> dict:
 
     from rheograph.graphs.dataset import SnapshotGraphDataset
     from rheograph.learn.datamodule import split_files
-    from rheograph.learn.predict import load_bundle
+    from rheograph.learn.predict import load_bundle, short_relaxation
 
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())
     _, settings, _ = load_bundle(run_dir / f"fold{k}.pt")
@@ -70,20 +70,28 @@ def fold_rows(run_dir: Path, k: int, cache_dir: Path) -> dict:
             f"noise_bins: {run_dir}/fold{k}_predictions.npz does not hold the test rows of the cached "
             "graphs (another cache, or files changed since training)"
         )
-    return {"eps": eps, **saved}
+    flagged = short_relaxation([dataset[int(i)] for i in test], settings)
+    return {"eps": eps, "flagged": flagged, **saved}
 
 
 def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
-    """Markdown table lines: every saved predictor's metrics within each ε bin of ``rows``."""
+    """Markdown table lines: every saved predictor's metrics within each ε bin of ``rows``, on the rows
+    the model does not flag (a relaxation short of its strain: an arrested packing)."""
     from rheograph.learn.module import fold_metrics
     from rheograph.naming import state_point_key
 
     where = np.digitize(rows["eps"], edges) - 1
     # the top edge belongs to the last bin (the trained eps_max, stored in float32, may round past it)
     where[np.isclose(rows["eps"], edges[-1], rtol=1e-6)] = len(labels) - 1
+    flagged = [int(np.sum((where == b) & rows["flagged"])) for b in range(len(labels))]
+    # a flagged row's prediction comes with its reason (predict.py): score only what a user is served silently
+    where[rows["flagged"]] = -1
     groups = state_point_key(rows["phi"], rows["stress"])
     counts = [int(np.sum(where == b)) for b in range(len(labels))]
-    header = " | ".join(f"ε {label} (n {n})" for label, n in zip(labels, counts))
+    header = " | ".join(
+        f"ε {label} (n {n}" + (f", {f} flagged" if f else "") + ")"
+        for label, n, f in zip(labels, counts, flagged)
+    )
     lines = [f"| predictor | metric | {header} |", "|---|---|" + "---|" * len(labels)]
     for key, name in PREDICTORS:
         if key not in rows:
@@ -142,7 +150,9 @@ def main(argv=None) -> int:
         "log-uniform over the trained range, one row per copy, positions relaxed as the model reads "
         "them), split by the ε of each copy (bins in units of a; n: rows in the bin).  Every predictor is "
         "scored on the same rows; fluct.: correlation of predicted and true deviations from the "
-        "state-point mean; ±15 %: share of η_r within ±15 %.",
+        "state-point mean; ±15 %: share of η_r within ±15 %.  Rows whose relaxation stopped short of its "
+        "strain (an arrested or creeping packing) are predicted with that reason as out of the model's "
+        "domain; they are counted (flagged) and not scored.",
         "",
     ]
     for run in args.runs:

@@ -1,5 +1,6 @@
 """bench/noise_bins.py on a tiny run trained on noisy copies: every row lands in exactly one ε bin, the
-bins' scores are those of the rows in them, and the lookup does not depend on the noise."""
+bins' scores are those of the rows in them, rows the model flags are counted and not scored, and the
+lookup does not depend on the noise."""
 
 import re
 
@@ -8,7 +9,7 @@ import pytest
 from conftest import load_bench_script, train_tiny_fold
 
 
-def test_noise_bins_score_the_saved_test_rows_of_each_noise_level(tiny_files, tmp_path, capsys):
+def test_noise_bins_score_the_saved_test_rows_of_each_noise_level(tiny_files, tmp_path, capsys, monkeypatch):
     from rheograph.learn.module import fold_metrics
     from rheograph.naming import state_point_key
 
@@ -45,6 +46,21 @@ def test_noise_bins_score_the_saved_test_rows_of_each_noise_level(tiny_files, tm
     assert [int(c) for c in kept] == [rows["stress"].size]
     with pytest.raises(SystemExit, match="leaves no rows"):
         bench.main([str(run_dir), *skip, *map(str, stresses)])
+    # a row whose relaxation stopped short (an arrested packing: predict.py flags it) is counted in its
+    # bin as flagged and left out of every score there
+    flagged = np.zeros(rows["eps"].size, dtype=bool)
+    flagged[0] = True
+    monkeypatch.setattr("rheograph.learn.predict.short_relaxation", lambda graphs, settings: flagged.copy())
+    assert bench.main([str(run_dir), "--folds", "0", "--bins", *map(str, edges), "--cache-dir", cache,
+                       "--no-write"]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    first = 0 if low[0] else 1
+    kept = (low if first == 0 else ~low) & ~flagged
+    counts = re.findall(r"\(n (\d+)(?:, (\d+) flagged)?\)", text)
+    assert counts[first] == (str(int(kept.sum())), "1") and counts[1 - first][1] == ""
+    expected = fold_metrics(rows["pred"][kept], rows["true"][kept], groups[kept], rows["jammed"][kept])
+    line = next(s for s in text.splitlines() if s.startswith("| graph network | R² log η_r"))
+    assert float(line.split("|")[3 + first]) == pytest.approx(expected["r2_log_eta"], abs=6e-4)
     # bad bins end in one line
     with pytest.raises(SystemExit, match="increasing"):
         bench.main([str(run_dir), "--bins", "0.01", "0.001", "--no-write"])

@@ -133,6 +133,18 @@ def noise_reason(domain: dict, noise: float, alternatives=()) -> str:
     return ""
 
 
+def short_relaxation(graphs, settings: GraphSettings) -> np.ndarray:
+    """(S,) bool: graphs whose relaxation ran out of steps before ``settings.relax_strain``.
+
+    An arrested packing creeps, so its relaxation stops short of the strain the model's inputs were
+    trained on and they read a partly repaired configuration: such a snapshot is out of the model's
+    domain.  All False for a model that does not relax."""
+    if not settings.relax_strain:
+        return np.zeros(len(graphs), dtype=bool)
+    reached = np.array([float(getattr(g, "relaxed_strain", np.nan)) for g in graphs])
+    return reached < settings.relax_strain * (1.0 - 1e-9)
+
+
 def domain_report(
     domain: dict, snaps: Snapshots, graphs, settings: GraphSettings
 ) -> tuple[np.ndarray, list[str]]:
@@ -159,18 +171,15 @@ def domain_report(
         reason = noise_reason(domain, noise, models_for_noise(snaps.phi, snaps.n_particles, noise))
         reasons.append(reason)
     flags = np.full(len(graphs), not reasons)
-    if settings.relax_strain:
-        # an arrested packing creeps: its relaxation ran out of steps before the strain the model's
-        # inputs were trained on, so they read a partly repaired configuration
-        reached = np.array([float(getattr(g, "relaxed_strain", np.nan)) for g in graphs])
-        short = reached < settings.relax_strain * (1.0 - 1e-9)
-        if short.any():
-            flags[short] = False
-            reasons.append(
-                f"relaxation reached {np.nanmin(reached):.2g} of its {settings.relax_strain:g} strain within "
-                f"its step budget in {int(short.sum())} snapshot(s) (an arrested or creeping packing): "
-                "their inputs read a partly repaired configuration"
-            )
+    short = short_relaxation(graphs, settings)
+    if short.any():
+        reached = min(float(g.relaxed_strain) for g, s in zip(graphs, short) if s)
+        flags[short] = False
+        reasons.append(
+            f"relaxation reached {reached:.2g} of its {settings.relax_strain:g} strain within its step "
+            f"budget in {int(short.sum())} snapshot(s) (an arrested or creeping packing): their inputs "
+            "read a partly repaired configuration"
+        )
     edge_features = settings.edge_features
     low, high = np.array(domain["edge_min"]), np.array(domain["edge_max"])
     span = np.maximum(high - low, 1e-12)
