@@ -1,0 +1,149 @@
+"""The position-noise figure: unexplained variance 1 − R² of each target against the noise ε per
+coordinate, at φ = 0.70, 0.76 and 0.80 (N = 400, held-out trajectories), for the exact model, the exact
+model on positions relaxed by a short shear, the imaging model, trees on descriptors of the noisy
+positions, gap-shell inputs (φ = 0.76) and the lookup of the training mean at (φ, σ).
+
+    python bench/noise_figure.py
+
+It draws the tables that ``bench/snapshot_noise.py`` published in docs/benchmarks.md (sections
+``snapshot_noise_phi070``, ``snapshot_noise_imaging``, ``snapshot_noise_phi080``; their commands are
+printed there), so it costs no prediction: rerun those commands to refresh the numbers, then this.
+Writes docs/figures/imaging_noise.png (``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TARGETS = (("R² log η_r", "log η_r"), ("R² log Π", "log Π"), ("R² Z_μ", "Z_μ"))
+RELAXED = "graph network on positions relaxed by Δγ = 0.01 (every 4th)"  # the exact model, relaxed input
+# (φ, section, [(run heading, predictor row, legend label)])
+PANELS = (
+    (
+        0.70,
+        "snapshot_noise_phi070",
+        [
+            ("N400_phi0.70", "graph network", "exact model"),
+            ("N400_phi0.70", RELAXED, "exact model, relaxed positions"),
+            ("N400_phi0.70_relaxed_measured", "trees on descriptors + σ", "trees on descriptors + σ"),
+            ("N400_phi0.70_relaxed_measured", "graph network", "imaging model"),
+            ("N400_phi0.70_relaxed_measured", "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
+        ],
+    ),
+    (
+        0.76,
+        "snapshot_noise_imaging",
+        [
+            ("N400_phi0.76", "graph network", "exact model"),
+            ("N400_phi0.76", RELAXED, "exact model, relaxed positions"),
+            ("N400_phi0.76_relaxed_measured", "trees on descriptors + σ", "trees on descriptors + σ"),
+            ("N400_phi0.76_shells", "graph network", "gap shells, ε known"),
+            ("N400_phi0.76_relaxed_measured", "graph network", "imaging model"),
+            ("N400_phi0.76_relaxed_measured", "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
+        ],
+    ),
+    (
+        0.80,
+        "snapshot_noise_phi080",
+        [
+            ("N400_phi0.80", "graph network", "exact model"),
+            ("N400_phi0.80", RELAXED, "exact model, relaxed positions"),
+            ("N400_phi0.80_relaxed", "trees on descriptors + σ", "trees on descriptors + σ"),
+            ("N400_phi0.80_relaxed", "graph network", "imaging model"),
+            ("N400_phi0.80_relaxed", "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
+        ],
+    ),
+)  # fmt: skip
+STYLE = {
+    "exact model": dict(color="tab:red", marker="x"),
+    "exact model, relaxed positions": dict(color="tab:orange", marker="v"),
+    "trees on descriptors + σ": dict(color="tab:green", marker="s"),
+    "gap shells, ε known": dict(color="tab:purple", marker="D"),
+    "imaging model": dict(color="tab:blue", marker="o", linewidth=2.2),
+    "lookup: mean at (φ, σ)": dict(color="black", linestyle="--", marker=""),
+}
+
+
+def section_tables(page: str, section: str) -> tuple[list[float], dict]:
+    """The noise levels of a published snapshot_noise section of the text ``page`` and its rows:
+    {(run, predictor, metric): [value per ε]}."""
+    start, end = f"<!-- {section}:start -->", f"<!-- {section}:end -->"
+    if start not in page or end not in page:
+        sys.exit(f"noise_figure: the page has no section {section}: run its bench/snapshot_noise.py command")
+    text = page[page.index(start) : page.index(end)]
+    rows, eps, run = {}, None, None
+    for line in text.splitlines():
+        heading = re.match(r"\*\*(\S+?)\*\*", line)
+        if heading:
+            run = heading.group(1)
+        elif line.startswith("| predictor |"):
+            found = [float(x) for x in re.findall(r"ε = ([0-9.e-]+)", line)]
+            if eps is not None and found != eps:
+                sys.exit(f"noise_figure: section {section} mixes noise levels {eps} and {found}")
+            eps = found
+        elif line.startswith("| ") and run is not None and not line.startswith("|---"):
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            rows[(run, cells[0], cells[1])] = [float(c) for c in cells[2:]]
+    if eps is None:
+        sys.exit(f"noise_figure: section {section} holds no table of noise levels")
+    return eps, rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--page", default=str(ROOT / "docs" / "benchmarks.md"))
+    ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "imaging_noise.png"))
+    args = ap.parse_args(argv)
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    page = Path(args.page).read_text()
+    fig, axes = plt.subplots(len(PANELS), len(TARGETS), figsize=(12, 10), sharex=True, squeeze=False)
+    floor = 5e-4  # half the last digit the tables print: an R² shown as 1.000 is drawn here
+    for row, (phi, section, curves) in enumerate(PANELS):
+        eps, rows = section_tables(page, section)
+        # ε = 0 drawn a decade below the smallest ε > 0, on the log axis
+        x = np.array([e if e > 0 else min(v for v in eps if v > 0) / 10 for e in eps])
+        for col, (metric, title) in enumerate(TARGETS):
+            ax = axes[row, col]
+            for run, predictor, label in curves:
+                if (run, predictor, metric) not in rows:
+                    sys.exit(f"noise_figure: section {section} has no row '{predictor}' / {metric} of {run}")
+                unexplained = np.maximum(1.0 - np.asarray(rows[(run, predictor, metric)]), floor)
+                ax.plot(x, unexplained, label=label, **STYLE[label])
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_ylim(floor / 1.5, 5e3)
+            ax.set_title(f"φ = {phi:.2f}: {title}", fontsize=10)
+            ax.grid(True, which="major", alpha=0.3)
+            ax.set_xticks(x, ["0" if e == 0 else f"{e:g}" for e in eps], rotation=45, fontsize=8)
+            ax.minorticks_off()
+            if col == 0:
+                ax.set_ylabel("1 − R² (held out)")
+            if row == len(PANELS) - 1:
+                ax.set_xlabel("position noise ε per coordinate [a]")
+    handles = {}
+    for ax in axes.flat:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=3, frameon=False)
+    fig.suptitle("Imprecise positions, N = 400: unexplained variance against the noise (lower is better)")
+    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
