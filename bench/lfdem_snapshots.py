@@ -10,11 +10,19 @@ output every 0.1 strain, ``out_data_particle`` and ``out_data_interaction`` on).
 rows need no training: the one-solve η_r, the contact-spring pressure and the counted Z_μ computed from
 the same positions (the ``eta_solve``, ``pressure_spring``, ``z_mu_counted`` columns of a
 prediction).  Results replace the marked section of docs/benchmarks.md unless ``--no-write``.
+
+With ``--noise ε`` Gaussian noise of ε per coordinate [a] (seeded, ``--seed``) is added to LF_DEM's
+positions and declared to the model with the rounding (``position_noise`` = √(rounding² + ε²)): an
+imaging model on snapshots of a code it was never trained on.
+
+    python bench/lfdem_snapshots.py --runs ... --model N400_phi0.76_imaging --noise 0.01 \
+        --section lfdem_snapshots_imaging
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
 import sys
 import time
 from pathlib import Path
@@ -41,8 +49,35 @@ def scores(pred: np.ndarray, true: np.ndarray) -> tuple[float, float, float]:
     return tuple(out)
 
 
-def main(argv=None) -> int:
+def state_means(paths: list[str], min_strain: float) -> dict:
+    """{σ/σ0: (3,)} over the flowing snapshots at strain >= ``min_strain`` of rheograph trajectories:
+    geometric means of η_r and Π (the scores are in log), mean of Z_μ — what their data says at each
+    stress without reading a snapshot."""
     from rheograph.io.snapshots import read_snapshots
+
+    pooled: dict = {}
+    pooled_paths: list[str] = []
+    for pattern in paths:  # quoted globs expand here
+        found = sorted(glob.glob(pattern))
+        if not found:
+            sys.exit(f"lfdem_snapshots: --lookup {pattern} matches no file")
+        pooled_paths.extend(found)
+    for path in pooled_paths:
+        snaps = read_snapshots(path)
+        keep = (snaps.strain >= min_strain) & ~snaps.jammed
+        t = snaps.targets[keep]
+        pooled.setdefault(round(float(snaps.stress), 9), []).append(
+            np.column_stack([np.log(t[:, 0]), np.log(t[:, 1]), t[:, 2]])
+        )
+    means = {}
+    for stress, parts in pooled.items():
+        mean = np.concatenate(parts).mean(axis=0)
+        means[stress] = np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]])
+    return means
+
+
+def main(argv=None) -> int:
+    from rheograph.io.snapshots import noisy_positions, read_snapshots
     from rheograph.learn.predict import load_model
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -50,19 +85,46 @@ def main(argv=None) -> int:
     ap.add_argument("--model", default="N400_phi0.76")
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument("--timing-snapshots", type=int, default=1000)
+    ap.add_argument("--noise", type=float, default=0.0, help="Gaussian position noise per coordinate [a]")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    ap.add_argument("--section", default="lfdem_snapshots", help="the marked section of docs/benchmarks.md")
+    ap.add_argument(
+        "--lookup",
+        nargs="+",
+        default=[],
+        help="rheograph trajectories at the runs' φ: their mean at each σ is scored as the lookup row",
+    )
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
+    if not (np.isfinite(args.noise) and args.noise >= 0.0):
+        sys.exit(f"lfdem_snapshots: --noise {args.noise}: give a noise level >= 0 (units of a)")
+    rng = np.random.default_rng(args.seed)
+    lookup = state_means(args.lookup, args.min_strain) if args.lookup else {}
+
+    def load(path):
+        """The run's snapshots, with the noise of ``--noise`` added and declared."""
+        snaps = read_snapshots(path)
+        if args.noise > 0.0:
+            snaps.positions = np.stack(
+                [noisy_positions(snaps, k, args.noise, rng) for k in range(len(snaps))]
+            )
+            snaps.position_noise = float(np.hypot(snaps.position_noise or 0.0, args.noise))
+        return snaps
 
     model = load_model(args.model)
-    rows, physics, true, per_run = [], [], [], []
+    rows, physics, true, per_run, looked_up = [], [], [], [], []
     start = time.perf_counter()
     for path in sorted(args.runs):
-        snaps = read_snapshots(path)
+        snaps = load(path)
         table = model.predict_snapshots(snaps)
         keep = snaps.strain >= args.min_strain
         pred = np.stack([table[f"{t}_pred"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]
         sim = np.stack([table[f"{t}_sim"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]
         phys = np.stack([table[c] for c in ("eta_solve", "pressure_spring", "z_mu_counted")], axis=1)[keep]
+        if lookup:
+            if round(float(snaps.stress), 9) not in lookup:
+                sys.exit(f"lfdem_snapshots: --lookup has no trajectory at σ/σ0 = {snaps.stress:g} ({path})")
+            looked_up.append(np.repeat(lookup[round(float(snaps.stress), 9)][None], len(pred), axis=0))
         rows.append(pred)
         physics.append(phys)
         true.append(sim)
@@ -76,9 +138,10 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - start
     pred, phys, sim = np.concatenate(rows), np.concatenate(physics), np.concatenate(true)
     net, solve = scores(pred, sim), scores(phys, sim)
+    base = scores(np.concatenate(looked_up), sim) if lookup else None
 
     # cost: the first run's snapshots repeated up to --timing-snapshots, one process, after warm-up
-    snaps = read_snapshots(sorted(args.runs)[0])
+    snaps = load(sorted(args.runs)[0])
     reps = int(np.ceil(args.timing_snapshots / len(snaps)))
     snaps.positions = np.concatenate([snaps.positions] * reps)[: args.timing_snapshots]
     for name in ("le_offset", "strain", "jammed"):
@@ -89,11 +152,17 @@ def main(argv=None) -> int:
     cost = time.perf_counter() - t0
 
     command = command_line("lfdem_snapshots.py", argv)
+    noise = (
+        f", plus Gaussian noise of {args.noise:g} a per coordinate (seed {args.seed}) declared to the model"
+        if args.noise > 0.0
+        else ""
+    )
     lines = [
-        f"### A shipped model on LF_DEM snapshots ({args.model})",
+        f"### A shipped model on LF_DEM snapshots ({args.model}"
+        + (f", ε = {args.noise:g} a)" if noise else ")"),
         "",
         f"{len(sim)} snapshots at strain ≥ {args.min_strain:g} of {len(rows)} LF_DEM runs, read from their "
-        "`par_*.dat` (positions to LF_DEM's 6 printed digits) with LF_DEM's own η_r = σ/γ̇, Π and Z_μ "
+        f"`par_*.dat` (positions to LF_DEM's 6 printed digits{noise}) with LF_DEM's own η_r = σ/γ̇, Π and Z_μ "
         "(contact states of `int_*.dat`) as the truth; all runs scored together.",
         "",
         "| predictor | R² log η_r | R² log Π | R² Z_μ |",
@@ -101,8 +170,16 @@ def main(argv=None) -> int:
         f"| graph network ({args.model}) | {net[0]:.4f} | {net[1]:.5f} | {net[2]:.5f} |",
         f"| physics only: one-solve η_r, contact-spring Π, counted Z_μ | {solve[0]:.4f} | {solve[1]:.5f} | "
         f"{solve[2]:.5f} |",
+        *(
+            [
+                f"| lookup: mean of the rheograph runs at each σ | {base[0]:.4f} | {base[1]:.5f} | "
+                f"{base[2]:.5f} |"
+            ]
+            if lookup
+            else []
+        ),
         "",
-        "| σ/σ0 | LF_DEM disp_max | snapshots | position rounding RMS [a] | η_r LF_DEM | η_r predicted | "
+        "| σ/σ0 | LF_DEM disp_max | snapshots | position noise declared [a] | η_r LF_DEM | η_r predicted | "
         "Π LF_DEM | Π predicted | Z_μ LF_DEM | Z_μ predicted | in domain |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
         *[row for _, row in sorted(per_run)],
@@ -113,7 +190,7 @@ def main(argv=None) -> int:
         "",
         f"Command: `{command}`",
     ]
-    publish("lfdem_snapshots", "\n".join(lines), not args.no_write)
+    publish(args.section, "\n".join(lines), not args.no_write)
     return 0
 
 
