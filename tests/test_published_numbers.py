@@ -69,7 +69,9 @@ def test_shipped_model_is_its_training_runs_bundles():
     assert shipped["graph"] == trained["graph"] and shipped["hparams"] == trained["hparams"]
 
 
-@pytest.mark.parametrize("name", ["N400_phi0.76_imaging", "pooled_N400_imaging"])
+@pytest.mark.parametrize(
+    "name", ["N400_phi0.70_imaging", "N400_phi0.76_imaging", "N400_phi0.80_imaging", "pooled_N400_imaging"]
+)
 def test_shipped_imaging_model_reproduces_its_committed_noisy_test_predictions(name):
     """The imaging models' published scores are guarded the same way: the seeded noisy copies of a
     test trajectory, relaxed and read as in training, give the committed predictions."""
