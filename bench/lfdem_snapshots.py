@@ -50,29 +50,37 @@ def scores(pred: np.ndarray, true: np.ndarray) -> tuple[float, float, float]:
 
 
 def state_means(paths: list[str], min_strain: float) -> dict:
-    """{σ/σ0: (3,)} over the flowing snapshots at strain >= ``min_strain`` of rheograph trajectories:
-    geometric means of η_r and Π (the scores are in log), mean of Z_μ — what their data says at each
-    stress without reading a snapshot."""
+    """{σ/σ0: (φ, N, (3,) means)} over the flowing snapshots at strain >= ``min_strain`` of rheograph
+    trajectories (globs): geometric means of η_r and Π (the scores are in log), mean of Z_μ — what their
+    data says at each stress without reading a snapshot."""
     from rheograph.io.snapshots import read_snapshots
 
-    pooled: dict = {}
-    pooled_paths: list[str] = []
+    files: list[str] = []
     for pattern in paths:  # quoted globs expand here
         found = sorted(glob.glob(pattern))
         if not found:
             sys.exit(f"lfdem_snapshots: --lookup {pattern} matches no file")
-        pooled_paths.extend(found)
-    for path in pooled_paths:
+        files.extend(found)
+    pooled: dict = {}
+    for path in files:
         snaps = read_snapshots(path)
         keep = (snaps.strain >= min_strain) & ~snaps.jammed
         t = snaps.targets[keep]
-        pooled.setdefault(round(float(snaps.stress), 9), []).append(
+        pooled.setdefault((round(float(snaps.stress), 9), round(snaps.phi, 6), snaps.n_particles), []).append(
             np.column_stack([np.log(t[:, 0]), np.log(t[:, 1]), t[:, 2]])
         )
     means = {}
-    for stress, parts in pooled.items():
-        mean = np.concatenate(parts).mean(axis=0)
-        means[stress] = np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]])
+    for (stress, phi, n), parts in pooled.items():
+        if stress in means:
+            sys.exit(f"lfdem_snapshots: --lookup mixes state points at σ/σ0 = {stress:g}: give one φ and N")
+        scored = np.concatenate(parts)
+        if not len(scored):
+            sys.exit(
+                f"lfdem_snapshots: --lookup has no flowing snapshot at strain >= {min_strain:g}, "
+                f"σ/σ0 = {stress:g}"
+            )
+        mean = scored.mean(axis=0)
+        means[stress] = (phi, n, np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]]))
     return means
 
 
@@ -124,7 +132,13 @@ def main(argv=None) -> int:
         if lookup:
             if round(float(snaps.stress), 9) not in lookup:
                 sys.exit(f"lfdem_snapshots: --lookup has no trajectory at σ/σ0 = {snaps.stress:g} ({path})")
-            looked_up.append(np.repeat(lookup[round(float(snaps.stress), 9)][None], len(pred), axis=0))
+            phi, n, mean = lookup[round(float(snaps.stress), 9)]
+            if abs(phi - snaps.phi) > 1e-3 or n != snaps.n_particles:
+                sys.exit(
+                    f"lfdem_snapshots: --lookup runs are at φ = {phi:g}, N = {n}; {path} at "
+                    f"φ = {snaps.phi:g}, N = {snaps.n_particles}"
+                )
+            looked_up.append(np.repeat(mean[None], len(pred), axis=0))
         rows.append(pred)
         physics.append(phys)
         true.append(sim)
@@ -133,6 +147,7 @@ def main(argv=None) -> int:
             f"{snaps.position_noise:.1e} | {sim[:, 0].mean():.1f} | {pred[:, 0].mean():.1f} | "
             f"{sim[:, 1].mean():.2f} | {pred[:, 1].mean():.2f} | {sim[:, 2].mean():.3f} | "
             f"{pred[:, 2].mean():.3f} | {table['in_domain'][keep].mean():.2f} |"
+            + (f" {looked_up[-1][0, 0]:.1f} |" if lookup else "")
         )
         per_run.append((snaps.stress, row))
     seconds = time.perf_counter() - start
@@ -180,8 +195,9 @@ def main(argv=None) -> int:
         ),
         "",
         "| σ/σ0 | LF_DEM disp_max | snapshots | position noise declared [a] | η_r LF_DEM | η_r predicted | "
-        "Π LF_DEM | Π predicted | Z_μ LF_DEM | Z_μ predicted | in domain |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "Π LF_DEM | Π predicted | Z_μ LF_DEM | Z_μ predicted | in domain |"
+        + (" η_r lookup |" if lookup else ""),
+        "|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if lookup else ""),
         *[row for _, row in sorted(per_run)],
         "",
         f"Prediction cost: {args.timing_snapshots} N = {snaps.n_particles} snapshots in {cost:.1f} s on one "

@@ -33,29 +33,31 @@ def test_lfdem_snapshots_add_and_declare_position_noise(capsys):
         bench.main([*common, "--noise", "-1"])
 
 
-def test_lfdem_snapshots_lookup_is_the_rheograph_mean_at_the_stress(capsys):
+def test_lfdem_snapshots_lookup_is_the_rheograph_mean_at_the_stress():
     import numpy as np
 
     from rheograph.io.snapshots import read_snapshots
 
     bench = load_bench_script("lfdem_snapshots")
-    runs = sorted((ROOT / "data" / "paper" / "multirun").glob("N400_phi0.76_s10_seed*/trajectory.h5"))
+    multirun = ROOT / "data" / "paper" / "multirun"
+    runs = sorted(multirun.glob("N400_phi0.76_s10_seed*/trajectory.h5"))
     means = bench.state_means([str(p) for p in runs], min_strain=1.0)
     assert list(means) == [10.0]
+    phi, n, mean = means[10.0]
+    assert (phi, n) == (0.76, 400)
     # geometric means of eta_r and Pi, arithmetic of Z_mu, over the flowing snapshots at strain >= 1
     t = np.concatenate([(s.targets[(s.strain >= 1.0) & ~s.jammed]) for s in map(read_snapshots, runs)])
     expected = [np.exp(np.log(t[:, 0]).mean()), np.exp(np.log(t[:, 1]).mean()), t[:, 2].mean()]
-    assert means[10.0] == pytest.approx(expected, rel=1e-12)
+    assert mean == pytest.approx(expected, rel=1e-12)
+    # two state points at one stress are not one lookup
+    with pytest.raises(SystemExit, match="mixes state points"):
+        bench.state_means([str(multirun / "N*_phi0.76_s10_seed1_*/trajectory.h5")], min_strain=1.0)
     args = ["--runs", str(PAR), "--model", "N400_phi0.76", "--min-strain", "0", "--timing-snapshots", "2",
             "--no-write"]  # fmt: skip
-    assert (
-        bench.main([*args, "--lookup", str(runs[0].parent.parent / "N400_phi0.76_s10_seed*/trajectory.h5")])
-        == 0
-    )
-    assert "| lookup: mean of the rheograph runs at each σ |" in capsys.readouterr().out
+    # the fixture run is N = 100: a lookup of N = 400 runs is another state point
+    with pytest.raises(SystemExit, match="N = 400; .* N = 100"):
+        bench.main([*args, "--lookup", str(multirun / "N400_phi0.76_s10_seed*/trajectory.h5")])
     with pytest.raises(SystemExit, match="matches no file"):
         bench.main([*args, "--lookup", "no/such/*.h5"])
     with pytest.raises(SystemExit, match="no trajectory at σ/σ0 = 10"):
-        bench.main(
-            [*args, "--lookup", str(ROOT / "data/paper/multirun/N400_phi0.76_s2_seed1*/trajectory.h5")]
-        )
+        bench.main([*args, "--lookup", str(multirun / "N400_phi0.76_s2_seed1*/trajectory.h5")])
