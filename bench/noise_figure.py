@@ -23,43 +23,33 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (("R² log η_r", "log η_r"), ("R² log Π", "log Π"), ("R² Z_μ", "Z_μ"))
 RELAXED = "graph network on positions relaxed by Δγ = 0.01 (every 4th)"  # the exact model, relaxed input
-# (φ, section, [(run heading, predictor row, legend label)])
+# (φ, published section, the exact model's run, the imaging model's run, further (run, row, label))
 PANELS = (
-    (
-        0.70,
-        "snapshot_noise_phi070",
-        [
-            ("N400_phi0.70", "graph network", "exact model"),
-            ("N400_phi0.70", RELAXED, "exact model, relaxed positions"),
-            ("N400_phi0.70_relaxed_measured", "trees on descriptors + σ", "trees on descriptors + σ"),
-            ("N400_phi0.70_relaxed_measured", "graph network", "imaging model"),
-            ("N400_phi0.70_relaxed_measured", "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
-        ],
-    ),
+    (0.70, "snapshot_noise_phi070", "N400_phi0.70", "N400_phi0.70_relaxed_measured", ()),
     (
         0.76,
         "snapshot_noise_imaging",
-        [
-            ("N400_phi0.76", "graph network", "exact model"),
-            ("N400_phi0.76", RELAXED, "exact model, relaxed positions"),
-            ("N400_phi0.76_relaxed_measured", "trees on descriptors + σ", "trees on descriptors + σ"),
-            ("N400_phi0.76_shells", "graph network", "gap shells, ε known"),
-            ("N400_phi0.76_relaxed_measured", "graph network", "imaging model"),
-            ("N400_phi0.76_relaxed_measured", "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
-        ],
+        "N400_phi0.76",
+        "N400_phi0.76_relaxed_measured",
+        (("N400_phi0.76_shells", "graph network", "gap shells, ε known"),),
     ),
-    (
-        0.80,
-        "snapshot_noise_phi080",
-        [
-            ("N400_phi0.80", "graph network", "exact model"),
-            ("N400_phi0.80", RELAXED, "exact model, relaxed positions"),
-            ("N400_phi0.80_relaxed", "trees on descriptors + σ", "trees on descriptors + σ"),
-            ("N400_phi0.80_relaxed", "graph network", "imaging model"),
-            ("N400_phi0.80_relaxed", "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
-        ],
-    ),
-)  # fmt: skip
+    (0.80, "snapshot_noise_phi080", "N400_phi0.80", "N400_phi0.80_relaxed", ()),
+)
+
+
+def curves(exact: str, imaging: str, extra=()) -> list[tuple[str, str, str]]:
+    """(run heading, predictor row, legend label) of every curve of a panel; the trees and the lookup are
+    those of the imaging run (descriptors from the noisy positions, the same training folds)."""
+    return [
+        (exact, "graph network", "exact model"),
+        (exact, RELAXED, "exact model, relaxed positions"),
+        (imaging, "trees on descriptors + σ", "trees on descriptors + σ"),
+        *extra,
+        (imaging, "graph network", "imaging model"),
+        (imaging, "lookup: mean at (φ, σ)", "lookup: mean at (φ, σ)"),
+    ]
+
+
 STYLE = {
     "exact model": dict(color="tab:red", marker="x"),
     "exact model, relaxed positions": dict(color="tab:orange", marker="v"),
@@ -109,13 +99,13 @@ def main(argv=None) -> int:
     page = Path(args.page).read_text()
     fig, axes = plt.subplots(len(PANELS), len(TARGETS), figsize=(12, 10), sharex=True, squeeze=False)
     floor = 5e-4  # half the last digit the tables print: an R² shown as 1.000 is drawn here
-    for row, (phi, section, curves) in enumerate(PANELS):
+    for row, (phi, section, exact, imaging, extra) in enumerate(PANELS):
         eps, rows = section_tables(page, section)
         # ε = 0 drawn a decade below the smallest ε > 0, on the log axis
         x = np.array([e if e > 0 else min(v for v in eps if v > 0) / 10 for e in eps])
         for col, (metric, title) in enumerate(TARGETS):
             ax = axes[row, col]
-            for run, predictor, label in curves:
+            for run, predictor, label in curves(exact, imaging, extra):
                 if (run, predictor, metric) not in rows:
                     sys.exit(f"noise_figure: section {section} has no row '{predictor}' / {metric} of {run}")
                 unexplained = np.maximum(1.0 - np.asarray(rows[(run, predictor, metric)]), floor)

@@ -11,9 +11,9 @@ def test_noise_figure_reads_the_published_tables_and_draws_them(tmp_path):
     eps, rows = bench.section_tables(page, section)
     assert eps == [0.0, 0.001, 0.003, 0.01, 0.03, 0.05]
     # every row the figure draws is there, one value per noise level, each the table's own cell
-    for _, name, curves in bench.PANELS:
+    for _, name, exact, imaging, extra in bench.PANELS:
         levels, table = bench.section_tables(page, name)
-        for run, predictor, _ in curves:
+        for run, predictor, _ in bench.curves(exact, imaging, extra):
             for metric, _ in bench.TARGETS:
                 assert len(table[(run, predictor, metric)]) == len(levels)
     start = page.index(f"<!-- {section}:start -->")
