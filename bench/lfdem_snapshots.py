@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from simulate_speed import command_line, publish  # noqa: E402
+from zero_shot_n import lookup_mean  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,22 +66,18 @@ def state_means(paths: list[str], min_strain: float) -> dict:
     for path in files:
         snaps = read_snapshots(path)
         keep = (snaps.strain >= min_strain) & ~snaps.jammed
-        t = snaps.targets[keep]
-        pooled.setdefault((round(float(snaps.stress), 9), round(snaps.phi, 6), snaps.n_particles), []).append(
-            np.column_stack([np.log(t[:, 0]), np.log(t[:, 1]), t[:, 2]])
-        )
+        key = (round(float(snaps.stress), 9), round(snaps.phi, 6), snaps.n_particles)
+        pooled.setdefault(key, []).append(snaps.targets[keep])
     means = {}
     for (stress, phi, n), parts in pooled.items():
         if stress in means:
             sys.exit(f"lfdem_snapshots: --lookup mixes state points at σ/σ0 = {stress:g}: give one φ and N")
-        scored = np.concatenate(parts)
-        if not len(scored):
+        if not sum(len(t) for t in parts):
             sys.exit(
                 f"lfdem_snapshots: --lookup has no flowing snapshot at strain >= {min_strain:g}, "
                 f"σ/σ0 = {stress:g}"
             )
-        mean = scored.mean(axis=0)
-        means[stress] = (phi, n, np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]]))
+        means[stress] = (phi, n, lookup_mean(parts))
     return means
 
 

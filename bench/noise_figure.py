@@ -96,6 +96,8 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if not Path(args.page).is_file():
+        sys.exit(f"noise_figure: --page {args.page}: no such file (the validation log, docs/benchmarks.md)")
     page = Path(args.page).read_text()
     fig, axes = plt.subplots(len(PANELS), len(TARGETS), figsize=(12, 10), sharex=True, squeeze=False)
     floor = 5e-4  # half the last digit the tables print: an R² shown as 1.000 is drawn here

@@ -56,6 +56,14 @@ def _noisy(snaps, keep, eps: float, rng):
     )
 
 
+def lookup_mean(targets: list[np.ndarray]) -> np.ndarray:
+    """(3,) lookup of target rows (K_i, 3) pooled: geometric means of η_r and Π (the scores are in log),
+    the mean of Z_μ."""
+    scored = np.concatenate([np.column_stack([np.log(t[:, 0]), np.log(t[:, 1]), t[:, 2]]) for t in targets])
+    mean = scored.mean(axis=0)
+    return np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]])
+
+
 def other_seeds_mean(members) -> list[np.ndarray | None]:
     """Per trajectory, the lookup a user of the same state point could have: over the *other*
     trajectories at its (N, φ, σ), the geometric means of η_r and Π (the scores are in log) and the mean
@@ -64,16 +72,13 @@ def other_seeds_mean(members) -> list[np.ndarray | None]:
 
     keys = [state_point_key(np.array([s.phi]), np.array([s.stress]))[0] for s, _ in members]
     targets = [s.targets[k] for s, k in members]
-    scored = [np.column_stack([np.log(t[:, 0]), np.log(t[:, 1]), t[:, 2]]) for t in targets]
     out = []
     for i, (_, keep) in enumerate(members):
-        others = [scored[j] for j in range(len(members)) if j != i and keys[j] == keys[i]]
+        others = [targets[j] for j in range(len(members)) if j != i and keys[j] == keys[i]]
         if not others:
             out.append(None)
             continue
-        mean = np.concatenate(others).mean(axis=0)
-        row = np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]])
-        out.append(np.repeat(row[None], keep.size, axis=0))
+        out.append(np.repeat(lookup_mean(others)[None], keep.size, axis=0))
     return out
 
 

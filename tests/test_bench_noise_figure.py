@@ -34,3 +34,5 @@ def test_noise_figure_names_a_missing_section(tmp_path):
     page.write_text("# Benchmarks\n")
     with pytest.raises(SystemExit, match="no section snapshot_noise_phi070"):
         bench.main(["--page", str(page), "--out", str(tmp_path / "x.png")])
+    with pytest.raises(SystemExit, match="--page .*: no such file"):
+        bench.main(["--page", str(tmp_path / "absent.md"), "--out", str(tmp_path / "x.png")])
