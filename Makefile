@@ -73,7 +73,9 @@ cards: install
 	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.785,0.795 sim.seed=1,2,3,4,5,6" \
 	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.79 sim.seed=4,5,6" \
 	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.7875 sim.seed=1,2,3" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.81 sim.seed=1"
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.81 sim.seed=1" \
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.78,0.79 sim.seed=1,2" \
+	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.795 sim.seed=1"
 	$(PY) -m rheograph.dataset_card data/large_n --out docs/datasets/large_n \
 	    --title "Dataset card: large systems" \
 	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1 sim.n_particles=400,2000   # phi 0.76" \
