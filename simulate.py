@@ -11,7 +11,7 @@ import hydra  # noqa: E402
 from omegaconf import DictConfig  # noqa: E402
 
 from rheograph.cli import register_resolvers, simulate_main  # noqa: E402
-from rheograph.errors import one_line_errors  # noqa: E402
+from rheograph.errors import one_line_errors, run_hydra_app  # noqa: E402
 
 register_resolvers()
 
@@ -23,4 +23,4 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra_app(main, "simulate.py")

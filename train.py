@@ -5,7 +5,7 @@ import hydra
 from omegaconf import DictConfig
 
 from rheograph.cli import train_main
-from rheograph.errors import one_line_errors
+from rheograph.errors import one_line_errors, run_hydra_app
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
@@ -15,4 +15,4 @@ def main(cfg: DictConfig) -> float:
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra_app(main, "train.py")

@@ -4,7 +4,7 @@ import hydra
 from omegaconf import DictConfig
 
 from rheograph.cli import tune_main
-from rheograph.errors import one_line_errors
+from rheograph.errors import one_line_errors, run_hydra_app
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="tune")
@@ -14,4 +14,4 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra_app(main, "tune.py")

@@ -168,3 +168,22 @@ def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
         with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
             changed = compose(config_name="train", overrides=[*changed_overrides, override])
         assert config_fingerprint(changed) != current, override
+
+
+def test_every_graph_and_model_option_is_in_the_default_config():
+    """`graph.X=...` and `model.X=...` work for every option of GraphSettings and SurrogateModule (a key
+    missing from the default config would be refused as a misspelling)."""
+    import inspect
+
+    from rheograph.graphs.dataset import GraphSettings
+    from rheograph.learn.module import SurrogateModule
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="train")
+    assert {f.name for f in dataclasses.fields(GraphSettings)} <= set(cfg.graph)
+    # set by train.setup_fold from the data and the graph settings, not options of their own
+    derived = {"self", "node_in", "edge_in", "global_in", "viscosity_scale", "pressure_scale"}
+    derived |= {"pressure_per_stress", "state_mean_by_stress"}
+    derived |= {"z_mu_input", "viscosity_input", "pressure_input"}
+    options = set(inspect.signature(SurrogateModule.__init__).parameters) - derived
+    assert options <= set(cfg.model), options - set(cfg.model)

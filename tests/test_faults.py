@@ -150,6 +150,35 @@ def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp
         assert torch.equal(a.edge_attr, b.edge_attr) and int(a.run_id) == int(b.run_id)
 
 
+@pytest.mark.parametrize(
+    "script, override, needles",
+    [
+        ("simulate.py", "sim.phii=0.76", ["sim.phii: no such setting", "did you mean sim.phi?"]),
+        ("train.py", "data.phii=0.7", ["data.phii: no such setting", "did you mean data.phi?"]),
+        ("simulate.py", "sim=n4000", ["sim/n4000", "the options are: lfdem, n2000, n400, tiny"]),
+        ("train.py", "model=resgcnn", ["model/resgcnn", "resgcn, resgcn_physics"]),
+        ("simulate.py", "sim.phi=[1,2", ["sim.phi=[1,2:"]),
+    ],
+)
+def test_a_misspelled_override_is_one_line_naming_it(tmp_path, script, override, needles):
+    code, out = run([str(ROOT / script), override, f"hydra.run.dir={tmp_path}"], tmp_path)
+    assert_one_line_error(code, out, f"{script}: error:", *needles)
+    assert "+sim" not in out and "HYDRA_FULL_ERROR" not in out  # no advice to add the misspelled key
+
+
+def test_hydra_full_error_still_shows_a_composition_traceback(tmp_path):
+    env = {**os.environ, "HYDRA_FULL_ERROR": "1"}
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "simulate.py"), "sim.phii=0.76", f"hydra.run.dir={tmp_path}"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+        timeout=120,
+    )
+    assert done.returncode != 0 and "Traceback" in done.stderr and "sim.phii" in done.stderr
+
+
 def test_debug_flag_shows_the_traceback(tmp_path):
     import os
 

@@ -61,7 +61,9 @@ def main(argv=None) -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     sys.argv = [f"rheograph {command}", *rest]
     if command in HYDRA_APPS:
-        _hydra_app(command)()
+        from rheograph.errors import run_hydra_app
+
+        run_hydra_app(_hydra_app(command), f"rheograph {command}")
         return
     import importlib
 

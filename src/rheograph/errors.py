@@ -72,12 +72,65 @@ def _without_release_failure_reports():
         sys.unraisablehook, sys.excepthook = unraisablehook, excepthook
 
 
+def wants_traceback() -> bool:
+    """Whether the user asked for tracebacks instead of one-line errors: ``RHEOGRAPH_DEBUG`` set (and not
+    0), or else ``HYDRA_FULL_ERROR=1`` (``run_hydra_app`` turns the latter into the former, since it sets
+    ``HYDRA_FULL_ERROR`` itself)."""
+    debug = os.environ.get("RHEOGRAPH_DEBUG")
+    if debug is not None:
+        return debug not in ("", "0")
+    return os.environ.get("HYDRA_FULL_ERROR") == "1"
+
+
+def _hydra_error_line(exc: Exception) -> str:
+    """One line for what Hydra or OmegaConf refused while composing a configuration from the command line:
+    an unknown key (with the closest known ones), an unknown config option (with the options), or the
+    exception's own message with its lines joined."""
+    import difflib
+
+    from hydra.errors import MissingConfigException
+
+    if isinstance(exc, MissingConfigException) and exc.options:
+        first = str(exc).strip().splitlines()[0]
+        return f"{first}; the options are: {', '.join(exc.options)}"
+    key_error = exc.__cause__ if getattr(exc.__cause__, "full_key", None) else exc
+    full_key, key = getattr(key_error, "full_key", None), getattr(key_error, "key", None)
+    if full_key and "not in struct" in str(key_error):
+        parent = getattr(key_error, "parent_node", None)
+        known = [str(k) for k in parent.keys()] if hasattr(parent, "keys") else []
+        close = difflib.get_close_matches(str(key), known, n=3)
+        prefix = full_key[: -len(str(key))]
+        hint = f"did you mean {' or '.join(prefix + c for c in close)}? " if close else ""
+        return f"{full_key}: no such setting; {hint}`--cfg job` prints every setting"
+    lines = [line.strip().rstrip(".") for line in str(exc).splitlines() if line.strip()]
+    override = getattr(exc, "override", None)  # a malformed override: the parser's message does not name it
+    return (f"{override}: " if override else "") + ("; ".join(lines) or type(exc).__name__)
+
+
+def run_hydra_app(app, program: str):
+    """Runs a ``@hydra.main`` function: what Hydra refuses while composing the configuration from the
+    command line (a misspelled key, an unknown config option, a malformed override) ends the program with
+    one line naming it, like any bad input (Hydra itself prints several lines and a suggestion to add the
+    key with ``+``, which would only hide the misspelling)."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    os.environ["RHEOGRAPH_DEBUG"] = "1" if wants_traceback() else "0"
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it
+    try:
+        return app()
+    except (HydraException, OmegaConfBaseException) as exc:
+        if wants_traceback():
+            raise
+        sys.exit(f"{program}: error: {_hydra_error_line(exc)}")
+
+
 @contextmanager
 def one_line_errors(program: str):
     """Bad input (``InputError``, also when Hydra's instantiate wraps it) and a write that found no room
     (disk full, quota: ``NO_ROOM``; ``NoRoomError`` for a trajectory) end the program with one line
-    naming the problem and a non-zero status; ``HYDRA_FULL_ERROR=1`` or ``RHEOGRAPH_DEBUG=1`` re-raises it
-    with its traceback."""
+    naming the problem and a non-zero status; ``RHEOGRAPH_DEBUG=1`` or ``HYDRA_FULL_ERROR=1`` re-raises it
+    with its traceback (``wants_traceback``)."""
     try:
         with _without_release_failure_reports():
             yield
@@ -87,7 +140,7 @@ def one_line_errors(program: str):
             isinstance(cause, InputError) or (isinstance(cause, OSError) and cause.errno in NO_ROOM)
         ):
             cause = cause.__cause__
-        if cause is None or os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("RHEOGRAPH_DEBUG"):
+        if cause is None or wants_traceback():
             raise
         message = f"{program}: error: {cause if isinstance(cause, InputError) else _no_room_message(cause)}"
         in_main_process = multiprocessing.current_process().name == "MainProcess"

@@ -357,6 +357,11 @@ NEUTRAL_LATER_OPTIONS = (
     ("graph", "z_mu_on_count", False),
     ("graph", "viscosity_on_solve", False),
     ("graph", "viscosity_on_relaxed", False),
+    ("graph", "noise_range", []),
+    ("graph", "noise_copies", 0),
+    ("graph", "relax_strain", 0.0),
+    ("graph", "stress_known", True),
+    ("model", "on_state_mean", False),
 )
 
 
