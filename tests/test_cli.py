@@ -132,3 +132,31 @@ def test_every_shipped_fold_bundle_has_a_lightning_checkpoint_beside_it():
         MODELS_DIR / "N400_phi0.76" / "fold2.ckpt", map_location="cpu"
     )
     assert all(torch.equal(v, module.state_dict()[k]) for k, v in bundle["state_dict"].items())
+
+
+def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whole(tmp_path, monkeypatch):
+    """A model folder never mixes two runs: a second ship under the same name is refused; with
+    ``replace`` the new run's folds, error model and card replace the old ones, none of them kept."""
+    import shutil
+
+    from rheograph.errors import InputError
+    from rheograph.learn import registry
+
+    monkeypatch.setattr(registry, "MODELS_DIR", tmp_path / "models")
+    five_folds = ROOT / "docs/results/pressure_on_spring/N400_phi0.76"
+    registry.ship(five_folds, "m")
+    assert len(list((tmp_path / "models/m").glob("fold*.pt"))) == 5
+    one_fold = tmp_path / "run"  # the same run cut to its first fold, without an error model
+    one_fold.mkdir()
+    for name in ("fold0.pt", "fold0_split.json", "metrics.json"):
+        shutil.copy(five_folds / name, one_fold / name)
+    with pytest.raises(InputError, match="--name m: a model of that name is shipped"):
+        registry.ship(one_fold, "m")
+    assert len(list((tmp_path / "models/m").glob("fold*.pt"))) == 5
+    registry.ship(one_fold, "m", replace=True)
+    shipped = sorted(p.name for p in (tmp_path / "models/m").iterdir())
+    assert [p for p in shipped if p.startswith("fold")] == ["fold0.ckpt", "fold0.pt"]
+    assert "error_model.json" not in shipped and "card.json" in shipped
+    assert registry.list_models() == ["m"]  # no staging folder left, none listed
+    with pytest.raises(InputError, match="plain folder name"):
+        registry.ship(one_fold, "../elsewhere")

@@ -31,7 +31,7 @@ MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 def list_models() -> list[str]:
     if not MODELS_DIR.is_dir():
         return []
-    return sorted(p.name for p in MODELS_DIR.iterdir() if (p / "card.json").is_file())
+    return sorted(p.name for p in MODELS_DIR.iterdir() if (p / "card.json").is_file() and p.name[0] != ".")
 
 
 def model_paths(name_or_path: str | Path) -> tuple[list[Path], str]:
@@ -274,25 +274,45 @@ def write_lightning_checkpoint(bundle: dict, path: Path) -> None:
     path.write_bytes(buffer.getvalue())
 
 
-def ship(run_dir: str | Path, name: str) -> Path:
+def ship(run_dir: str | Path, name: str, replace: bool = False) -> Path:
+    """Makes ``rheograph/models/<name>/`` from the training run ``run_dir``.  A model already shipped
+    under ``name`` is kept unless ``replace``; then the new one is built beside it and swapped in whole,
+    so that no folder ever mixes the folds, error model or card of two runs."""
     run_dir = Path(run_dir)
     bundles = sorted(run_dir.glob("fold*.pt"))
     if not bundles:
         raise InputError(f"{run_dir}: no fold*.pt bundles")
+    if not name or name.startswith(".") or Path(name).name != name:
+        raise InputError(f"--name {name!r}: a model name is a plain folder name (letters, digits, _ - .)")
     directory = MODELS_DIR / name
-    directory.mkdir(parents=True, exist_ok=True)
+    if directory.exists() and not replace:
+        raise InputError(
+            f"--name {name}: a model of that name is shipped ({directory}); pick another name, or add "
+            "--replace to replace it whole"
+        )
+    staging = MODELS_DIR / f".{name}.shipping"
+    shutil.rmtree(staging, ignore_errors=True)  # from an interrupted ship
+    staging.mkdir(parents=True)
     first = None
     for path in bundles:
         bundle = torch.load(path, map_location="cpu", weights_only=True)
         bundle = _complete_bundle(bundle, path.with_name(path.stem + "_split.json"))
         buffer = io.BytesIO()
         torch.save(bundle, buffer)
-        (directory / path.name).write_bytes(buffer.getvalue())
-        write_lightning_checkpoint(bundle, directory / f"{path.stem}.ckpt")
+        (staging / path.name).write_bytes(buffer.getvalue())
+        write_lightning_checkpoint(bundle, staging / f"{path.stem}.ckpt")
         first = first or bundle
     if (run_dir / "error_model.json").is_file():
-        shutil.copy(run_dir / "error_model.json", directory / "error_model.json")
-    write_card(directory, name, run_dir, first)
+        shutil.copy(run_dir / "error_model.json", staging / "error_model.json")
+    write_card(staging, name, run_dir, first)
+    if directory.exists():
+        retired = MODELS_DIR / f".{name}.replaced"
+        shutil.rmtree(retired, ignore_errors=True)
+        directory.rename(retired)
+        staging.rename(directory)
+        shutil.rmtree(retired)
+    else:
+        staging.rename(directory)
     return directory
 
 
@@ -302,10 +322,11 @@ def main(argv=None) -> None:
     s = sub.add_parser("ship", help="make a named model of a training run directory")
     s.add_argument("run_dir")
     s.add_argument("--name", required=True)
+    s.add_argument("--replace", action="store_true", help="replace a model already shipped under --name")
     sub.add_parser("list", help="the shipped models")
     args = ap.parse_args(argv)
     if args.command == "ship":
-        print(ship(args.run_dir, args.name))
+        print(ship(args.run_dir, args.name, replace=args.replace))
     else:
         for name in list_models():
             print(name)
