@@ -365,6 +365,38 @@ def test_predict_cli_reads_all_kinds_and_names_bad_input(tiny_files, tmp_path):
         main(["--models", "nonesuch", "--out", str(tmp_path / "x.csv"), "--input", str(PAR)])
     assert not (tmp_path / "x.csv").exists()
 
+    # a bare file without one physical parameter: refused, pointing to --param; given that way, the
+    # predictions are those of the complete file
+    with np.load(tmp_path / "s.npz") as data:
+        np.savez(tmp_path / "no_kn.npz", **{k: data[k] for k in data.files if k != "kn_coefficient"})
+    with pytest.raises(InputError, match=r"missing key\(s\) \['kn_coefficient'\].*--param KEY=VALUE"):
+        main(
+            [
+                "--models",
+                "N400_phi0.76",
+                "--out",
+                str(tmp_path / "x.csv"),
+                "--input",
+                str(tmp_path / "no_kn.npz"),
+            ]
+        )
+    kn = float(np.load(tmp_path / "s.npz")["kn_coefficient"])
+    for name, extra in (("full", []), ("given", ["--param", f"kn_coefficient={kn!r}"])):
+        source = tmp_path / ("s.npz" if name == "full" else "no_kn.npz")
+        main(
+            [
+                "--models",
+                "N400_phi0.76",
+                "--out",
+                str(tmp_path / f"{name}.h5"),
+                "--input",
+                str(source),
+                *extra,
+            ]
+        )
+    with h5py.File(tmp_path / "full.h5") as full, h5py.File(tmp_path / "given.h5") as given:
+        np.testing.assert_array_equal(full["eta_pred"][()], given["eta_pred"][()])
+
 
 def test_train_py_trains_on_lfdem_runs(tmp_path):
     """data.files takes LF_DEM par files: a model of LF_DEM's own output, whose bundle records the

@@ -270,9 +270,10 @@ def _scalar(values: dict, key: str, where: str) -> float:
     return value
 
 
-def read_bare(path: str | Path) -> Snapshots:
-    """A bare snapshot file (module docstring lists its keys)."""
-    return snapshots_from_values(_bare_values(Path(path)), str(path), kind="bare")
+def read_bare(path: str | Path, params: dict | None = None) -> Snapshots:
+    """A bare snapshot file (module docstring lists its keys); ``params``: physical parameters given
+    beside the file, which supply or replace its own."""
+    return snapshots_from_values({**_bare_values(Path(path)), **(params or {})}, str(path), kind="bare")
 
 
 def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snapshots:
@@ -285,7 +286,8 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     if missing:
         raise InputError(
             f"{where}: missing key(s) {missing}; a bare snapshot file needs {list(required)} "
-            "(docs/data_format.md, 'Bare snapshot files')"
+            "(docs/data_format.md, 'Bare snapshot files'); physical parameters may instead be given "
+            "beside it (predict.py --param KEY=VALUE, keyword arguments of model.predict)"
         )
     positions = np.asarray(values["positions"], dtype=np.float64)
     if positions.ndim == 2:
@@ -399,9 +401,19 @@ def source_kind(path: str | Path) -> str:
     )
 
 
-def read_snapshots(path: str | Path, lfdem_params: str | Path | None = None) -> Snapshots:
+def read_snapshots(
+    path: str | Path, lfdem_params: str | Path | None = None, params: dict | None = None
+) -> Snapshots:
     """The snapshots of any source (module docstring); ``lfdem_params``: LF_DEM's parameter file, for
-    LF_DEM runs (``rheograph.io.lfdem.read_lfdem``)."""
+    LF_DEM runs (``rheograph.io.lfdem.read_lfdem``); ``params``: physical parameters (``sim.*`` names)
+    given beside the source, which supply or replace those it carries."""
+    snaps = _read_source(path, lfdem_params, params or {})
+    if params:
+        snaps.params = {**snaps.params, **params}
+    return snaps
+
+
+def _read_source(path: str | Path, lfdem_params: str | Path | None, params: dict) -> Snapshots:
     kind = source_kind(path)
     if kind != "lfdem" and lfdem_params is not None:
         raise InputError(f"{path}: an LF_DEM parameter file was given, but this is not an LF_DEM par_*.dat")
@@ -410,7 +422,7 @@ def read_snapshots(path: str | Path, lfdem_params: str | Path | None = None) -> 
             from rheograph.io.lfdem import read_lfdem
 
             return read_lfdem(path, lfdem_params)
-        return read_trajectory(path) if kind == "rheograph" else read_bare(path)
+        return read_trajectory(path) if kind == "rheograph" else read_bare(path, params)
     except InputError:
         raise
     except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:  # damaged or malformed content

@@ -502,9 +502,7 @@ def main(argv=None) -> None:
     given = dict(_parse_param(p) for p in args.param)
     tables = []
     for path in args.input:
-        snaps = read_snapshots(path, args.lfdem_params)
-        if given:
-            snaps.params = {**snaps.params, **given}
+        snaps = read_snapshots(path, args.lfdem_params, given)
         if args.position_noise is not None:
             snaps.position_noise = args.position_noise
         tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
