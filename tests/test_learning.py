@@ -569,14 +569,23 @@ def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
         train_folds(compose_train(base), run_dir)
 
 
-def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path):
+def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path, caplog):
     """fold_workers=2 trains folds in two processes; with one thread each and the same per-fold seeds, the
-    test predictions equal those of one process training the folds in turn."""
+    test predictions equal those of one process training the folds in turn, and each fold's epoch lines
+    reach this process's log."""
+    import logging
+
     from rheograph.learn.train import train_folds
 
     base = [*quick_folds(tiny_files, tmp_path), "report=false", "threads=1"]
     train_folds(compose_train(base), tmp_path / "sequential")
-    train_folds(compose_train([*base, "fold_workers=2"]), tmp_path / "parallel")
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        train_folds(compose_train([*base, "fold_workers=2"]), tmp_path / "parallel")
+    epoch_lines = [r.getMessage() for r in caplog.records if "epoch" in r.getMessage()]
+    for k in (0, 1):
+        assert any(f"fold {k}" in line for line in epoch_lines), epoch_lines
+    assert not any("earlier run" in r.getMessage() for r in caplog.records)
     a = np.load(tmp_path / "sequential" / "test_predictions.npz")
     b = np.load(tmp_path / "parallel" / "test_predictions.npz")
     np.testing.assert_array_equal(a["fold"], b["fold"])

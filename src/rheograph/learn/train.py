@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import logging
+import logging.handlers
 import os
 import shutil
 import warnings
@@ -240,10 +241,21 @@ def train_fold(
     return result, prediction
 
 
-def _fold_process(cfg_yaml: str, run_dir: str, k: int) -> None:
-    """Entry of one fold process (``fold_workers`` > 1): one torch thread, results to ``run_dir``.  The
-    OpenMP wait policy is inherited from the parent's environment (set by the entry points before torch
-    loads: OpenMP reads it once)."""
+class _RelayToLoggers(logging.Handler):
+    """Hands a record from a fold process to the logger of its name in this process, whose handlers
+    (Hydra's console and ``train.log``) write it."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logging.getLogger(record.name).handle(record)
+
+
+def _fold_process(cfg_yaml: str, run_dir: str, k: int, log_queue) -> None:
+    """Entry of one fold process (``fold_workers`` > 1): one torch thread, results to ``run_dir``, log
+    records (the per-epoch lines) to the parent through ``log_queue``.  The OpenMP wait policy is inherited
+    from the parent's environment (set by the entry points before torch loads: OpenMP reads it once)."""
+    root = logging.getLogger()
+    root.handlers = [logging.handlers.QueueHandler(log_queue)]
+    root.setLevel(logging.INFO)
     cfg = OmegaConf.create(cfg_yaml)
     torch.set_num_threads(1)
     logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
@@ -263,9 +275,18 @@ def train_folds_in_processes(cfg: DictConfig, run_dir: Path, folds: list[int]) -
     cfg_yaml = OmegaConf.to_yaml(cfg, resolve=True)
     workers = min(int(cfg.fold_workers), len(folds))
     log.info("training folds %s in %d processes", folds, workers)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        for future in [pool.submit(_fold_process, cfg_yaml, str(run_dir), k) for k in folds]:
-            future.result()  # re-raises a fold's error here
+    context = mp.get_context("spawn")
+    with context.Manager() as manager:
+        log_queue = manager.Queue()
+        listener = logging.handlers.QueueListener(log_queue, _RelayToLoggers())
+        listener.start()
+        try:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+                futures = [pool.submit(_fold_process, cfg_yaml, str(run_dir), k, log_queue) for k in folds]
+                for future in futures:
+                    future.result()  # re-raises a fold's error here
+        finally:
+            listener.stop()
 
 
 def folds_to_train(cfg: DictConfig) -> list[int]:
@@ -316,13 +337,16 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
     check_resumable(cfg, run_dir)
     folds = folds_to_train(cfg)
     workers = int(cfg.get("fold_workers") or 1)
+    in_processes = []
     if workers > 1 and fold_callbacks is None and len(folds) > 1:
-        train_folds_in_processes(cfg, run_dir, [k for k in folds if load_finished_fold(run_dir, k) is None])
+        in_processes = [k for k in folds if load_finished_fold(run_dir, k) is None]
+        train_folds_in_processes(cfg, run_dir, in_processes)
     fold_results, predictions = [], []
     for position, k in enumerate(folds):
         finished = load_finished_fold(run_dir, k)
-        if finished is not None:  # a resumed run (or a fold process) finished it: kept
-            log.info("fold %d finished (earlier invocation or fold process): kept", k)
+        if finished is not None:  # trained by a fold process just now, or by an earlier run: kept
+            if k not in in_processes:
+                log.info("fold %d was finished by an earlier run into %s: kept", k, run_dir)
             result, prediction = finished
         else:
             extra = fold_callbacks(position, k) if fold_callbacks is not None else []
