@@ -498,3 +498,33 @@ def test_damaged_sources_and_a_bad_output_path_are_refused_by_name(tmp_path):
         read_snapshots(truncated)
     with pytest.raises(InputError, match="--out .*existing directory"):
         main(["--models", "N400_phi0.76", "--out", str(tmp_path / "absent" / "p.csv"), "--input", str(PAR)])
+
+
+def test_start_up_snapshots_are_flagged_outside_a_steady_state_model(tmp_path):
+    """Snapshots before the strain the model's training snapshots start at (1: the start-up transient)
+    are predicted and flagged; the steady ones of the same run are not."""
+    from rheograph.learn.predict import main
+
+    run = ROOT / "data/lfdem_phi0.76_n400/s10/par_conf_params_stress10cl_shear.dat.gz"  # strain 0-2
+    main(["--models", "N400_phi0.76", "--out", str(tmp_path / "p.h5"), "--input", str(run)])
+    with h5py.File(tmp_path / "p.h5") as h5:
+        strain, in_domain = h5["strain"][()], h5["in_domain"][()]
+        notes = h5["notes"].asstr()[()]
+    early = strain < 1.0
+    assert early.any() and (~early).any()
+    assert not in_domain[early].any() and all("start-up transient" in n for n in notes[early])
+    assert in_domain[~early].all()
+
+
+def test_predict_cli_refuses_negative_noise_and_a_file_that_is_no_model(tmp_path):
+    from rheograph.learn.predict import main
+
+    out = ["--out", str(tmp_path / "x.csv"), "--input", str(PAR)]
+    with pytest.raises(InputError, match=r"--position-noise -1: an RMS precision in units of a, >= 0"):
+        main(["--models", "N400_phi0.76", "--position-noise", "-1", *out])
+    (tmp_path / "fake.pt").write_text("not a bundle")
+    with pytest.raises(
+        InputError, match=r"not a readable rheograph model bundle \(\w+\); give a shipped"
+    ) as err:
+        main(["--models", str(tmp_path / "fake.pt"), *out])
+    assert "\n" not in str(err.value)

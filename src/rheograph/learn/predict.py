@@ -66,8 +66,11 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
     """(module, graph settings, training domain) of a bundle written by ``train.save_bundle``."""
     try:
         bundle = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # a truncated or foreign file: torch raises several types
-        raise InputError(f"{path}: not a readable rheograph model bundle ({exc})") from exc
+    except Exception as exc:  # a truncated or foreign file: torch raises several types, in many lines
+        raise InputError(
+            f"{path}: not a readable rheograph model bundle ({type(exc).__name__}); give a shipped model's "
+            "name (predict.py --list-models), a training run directory or one of its fold*.pt"
+        ) from exc
     if not isinstance(bundle, dict) or bundle.get("format") != BUNDLE_FORMAT:
         raise InputError(
             f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
@@ -146,9 +149,10 @@ def short_relaxation(graphs, settings: GraphSettings) -> np.ndarray:
 
 
 def domain_report(
-    domain: dict, snaps: Snapshots, graphs, settings: GraphSettings
+    domain: dict, snaps: Snapshots, graphs, settings: GraphSettings, min_strain: float = 0.0
 ) -> tuple[np.ndarray, list[str]]:
-    """Per-snapshot in-domain flags (S,) and the reasons for any snapshot outside."""
+    """Per-snapshot in-domain flags (S,) and the reasons for any snapshot outside; ``min_strain``: the
+    strain from which the model's training snapshots were taken."""
     reasons = []
     for key, value in (("phi", snaps.phi), ("stress", snaps.stress)):
         if key == "stress" and not np.isfinite(value):  # a positions-only model is not told it
@@ -171,6 +175,15 @@ def domain_report(
         reason = noise_reason(domain, noise, models_for_noise(snaps.phi, snaps.n_particles, noise))
         reasons.append(reason)
     flags = np.full(len(graphs), not reasons)
+    # the start-up transient (strain below the training data's min_strain) is no steady state: a model
+    # trained on steady snapshots misreads it (at strain 0, eta_r by a factor ~3); unknown strain: no flag
+    early = (snaps.strain < min_strain) & ~np.asarray(snaps.jammed, dtype=bool)  # training kept arrested ones
+    if early.any():
+        flags[early] = False
+        reasons.append(
+            f"{int(early.sum())} snapshot(s) at strain < {min_strain:g}, the start-up transient the model "
+            "was not trained on (it learned steady flow)"
+        )
     short = short_relaxation(graphs, settings)
     if short.any():
         reached = min(float(g.relaxed_strain) for g, s in zip(graphs, short) if s)
@@ -215,6 +228,7 @@ class Surrogate:
         self.label = label
         self.paths = sorted(bundle_paths)
         self.models = [load_bundle(p) for p in self.paths]
+        self.min_strain = min(settings.min_strain for _, settings, _ in self.models)
         self.settings = dataclasses.replace(self.models[0][1], min_strain=0.0)
         if any(dataclasses.replace(s, min_strain=0.0) != self.settings for _, s, _ in self.models):
             raise InputError(f"{label}: the model bundles were trained with different graph settings")
@@ -302,7 +316,7 @@ class Surrogate:
             extra["mu_eff_pred"] = (1.0 / per_stress).mean(axis=0)  # sigma / Pi, the bulk friction
             preds[:, :, 1] = per_stress * snaps.stress  # NaN where sigma is unknown
             meta["stress"] = np.full(len(graphs), snaps.stress)
-        in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings)
+        in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings, self.min_strain)
         if notes:
             in_domain[:] = False
         reasons = notes + reasons
@@ -495,6 +509,10 @@ def main(argv=None) -> None:
     for name in ("models", "input", "out"):
         if getattr(args, name) is None:
             ap.error(f"--{name} is required (or --list-models)")
+    if args.position_noise is not None and not (
+        math.isfinite(args.position_noise) and args.position_noise >= 0
+    ):
+        raise InputError(f"--position-noise {args.position_noise:g}: an RMS precision in units of a, >= 0")
     out = Path(args.out)
     if out.suffix not in (".csv", ".h5") or not out.parent.is_dir():
         raise InputError(f"--out {out}: must be a .csv or .h5 file in an existing directory")
