@@ -15,18 +15,23 @@ SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
 install: $(VENV)/.installed
 
+# without apt-get or sudo rights the install goes on without them (and without the cholmod extra)
 system-packages:
 	@dpkg -s $(SYSTEM_PACKAGES) >/dev/null 2>&1 || { \
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(SYSTEM_PACKAGES) || \
 	  { $(SUDO) apt-get update && \
-	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(SYSTEM_PACKAGES); }; }
+	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(SYSTEM_PACKAGES); }; } || \
+	  echo "warning: could not install $(SYSTEM_PACKAGES); the sparse solver falls back to pip's qdldl"
 
+# torch first and pinned (a bare `torch` would pull a CUDA build of several GB): the CPU wheel where
+# pip's configuration provides it; elsewhere TORCH_INDEX=https://download.pytorch.org/whl/cpu
+TORCH_INDEX ?=
 $(VENV)/.installed: pyproject.toml | system-packages
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
-	# torch first and pinned: the CPU wheel the machines hold (a bare `torch` would pull a CUDA build)
-	$(PY) -m pip install "torch==2.13.0"
-	$(PY) -m pip install -e ".[dev,cholmod]"
+	$(PY) -m pip install "torch==2.13.0" $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
+	if dpkg -s libsuitesparse-dev >/dev/null 2>&1; then extras=dev,cholmod; else extras=dev; fi; \
+	$(PY) -m pip install -e ".[$$extras]"
 	touch $@
 
 # main job: a short simulation (N = 400, phi = 0.76, sigma/sigma0 = 10, 0.3 strain; resumed, i.e. skipped,

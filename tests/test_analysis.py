@@ -137,6 +137,17 @@ def test_reference_steps_per_strain_from_the_mean_dt_column(tmp_path):
     assert point["viscosity"] == pytest.approx(20.0)
 
 
+def test_a_reference_folder_without_lfdem_data_is_refused_by_name(tmp_path):
+    from rheograph.errors import InputError
+    from rheograph.flowcurve import reference_points
+
+    with pytest.raises(InputError, match="--reference .*nosuch: no LF_DEM data_N.*no such directory"):
+        reference_points(tmp_path / "nosuch")
+    (tmp_path / "data_other.dat").write_text("1 2 3\n")  # not LF_DEM's naming
+    with pytest.raises(InputError, match="no LF_DEM data_N"):
+        reference_points(tmp_path)
+
+
 def test_reference_step_counts_match_the_reference_readme():
     """README: 1.1e4 steps per strain at disp_max 2e-3 and 1.6e4 at 1e-3 (phi 0.76, sigma/sigma0 10)."""
     from rheograph.flowcurve import reference_points

@@ -112,11 +112,16 @@ def collect(directories) -> list[dict]:
 
 def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
     """LF_DEM data_N*_phi*_s*_disp*.dat files summarised with the same estimator as rheograph runs."""
+    pattern = r"data_N(\d+)_phi([\d.]+)_s([\d.]+)_disp([\d.e-]+)\.dat"
+    files = [(p, re.match(pattern, p.name)) for p in sorted(Path(directory).glob("data_*.dat"))]
+    files = [(p, m) for p, m in files if m]
+    if not files:
+        raise InputError(
+            f"--reference {directory}: no LF_DEM data_N<N>_phi<phi>_s<stress>_disp<disp>.dat files there"
+            + ("" if Path(directory).is_dir() else " (no such directory)")
+        )
     out = []
-    for path in sorted(Path(directory).glob("data_*.dat")):
-        m = re.match(r"data_N(\d+)_phi([\d.]+)_s([\d.]+)_disp([\d.e-]+)\.dat", path.name)
-        if not m:
-            continue
+    for path, m in files:
         d = read_lfdem_data(path)
         stress = float(m.group(3))
         s = steady_state_summary(d["strain"], d["time"], d["pressure"], d["z_mu"], d["z"], stress, strain_min)
@@ -238,10 +243,10 @@ def main(argv=None) -> None:
     ap.add_argument("--out", required=True, help="output directory for flow_curves.png / flow_curves.md")
     ap.add_argument("--reference", help="directory of LF_DEM data_*.dat files to compare with")
     args = ap.parse_args(argv)
+    reference = reference_points(args.reference) if args.reference else []
     points = collect(args.directories)
     if not points:
         raise InputError(f"no rheograph trajectory files under {args.directories}")
-    reference = reference_points(args.reference) if args.reference else []
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     plot(points, reference, out / "flow_curves.png")

@@ -89,6 +89,12 @@ def kfold_assignment(
 
 
 class SnapshotDataModule(L.LightningDataModule):
+    """Fold ``fold`` of a K-fold split (module docstring) of the snapshot graphs of ``files`` (trajectory
+    files, LF_DEM runs, globs or an index .json), built once with ``graph`` settings into ``cache_dir``;
+    ``phi`` / ``n_particles`` select the files of one area fraction / system size (null: all),
+    ``train_fraction`` < 1 keeps that share of each training run's snapshots.  Configured by the ``data``
+    group (``conf/data/``); ``setup`` makes the split and fits the standardisation on the training part."""
+
     def __init__(
         self,
         files: list[str] | str,

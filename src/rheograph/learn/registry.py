@@ -29,6 +29,7 @@ MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
 
 def list_models() -> list[str]:
+    """The names of the shipped models (``rheograph/models/<name>/``, each with a ``card.json``)."""
     if not MODELS_DIR.is_dir():
         return []
     return sorted(p.name for p in MODELS_DIR.iterdir() if (p / "card.json").is_file() and p.name[0] != ".")
@@ -46,11 +47,11 @@ def model_paths(name_or_path: str | Path) -> tuple[list[Path], str]:
     if path.is_dir():
         bundles = sorted(path.glob("fold*.pt"))
         if not bundles:
-            raise InputError(f"--models {path}: a directory without fold*.pt bundles (a training run?)")
+            raise InputError(f"model {path}: a directory without fold*.pt bundles (a training run?)")
         return bundles, str(path)
     shipped = ", ".join(list_models()) or "none installed"
     raise InputError(
-        f"--models {text}: neither a shipped model ({shipped}) nor a training run directory or bundle"
+        f"model {text}: neither a shipped model ({shipped}) nor a training run directory or bundle"
     )
 
 
