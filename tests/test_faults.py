@@ -384,7 +384,7 @@ def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tm
     kept = (run_dir / "fold0.pt").read_bytes()
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert "fold 0 finished" in done.stdout + done.stderr
+    assert "fold 0 was finished by an earlier run" in done.stdout + done.stderr
     assert (run_dir / "fold0.pt").read_bytes() == kept
     folds = json.loads((run_dir / "metrics.json").read_text())["folds"]
     assert [f["fold"] for f in folds] == [0, 1, 2]
