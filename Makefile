@@ -21,7 +21,7 @@ system-packages:
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(SYSTEM_PACKAGES) || \
 	  { $(SUDO) apt-get update && \
 	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $(SYSTEM_PACKAGES); }; } || \
-	  echo "warning: could not install $(SYSTEM_PACKAGES); the sparse solver falls back to pip's qdldl"
+	  echo "warning: could not install $(SYSTEM_PACKAGES) (without SuiteSparse the sparse solver is pip's qdldl)"
 
 # torch first and pinned (a bare `torch` would pull a CUDA build of several GB): the CPU wheel where
 # pip's configuration provides it; elsewhere TORCH_INDEX=https://download.pytorch.org/whl/cpu
@@ -30,7 +30,7 @@ $(VENV)/.installed: pyproject.toml | system-packages
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install "torch==2.13.0" $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
-	if dpkg -s libsuitesparse-dev >/dev/null 2>&1; then extras=dev,cholmod; else extras=dev; fi; \
+	if [ -e /usr/include/suitesparse/cholmod.h ]; then extras=dev,cholmod; else extras=dev; fi; \
 	$(PY) -m pip install -e ".[$$extras]"
 	touch $@
 

@@ -141,10 +141,12 @@ def test_a_reference_folder_without_lfdem_data_is_refused_by_name(tmp_path):
     from rheograph.errors import InputError
     from rheograph.flowcurve import reference_points
 
-    with pytest.raises(InputError, match="--reference .*nosuch: no LF_DEM data_N.*no such directory"):
+    with pytest.raises(InputError, match="--reference .*nosuch: no such directory"):
         reference_points(tmp_path / "nosuch")
-    (tmp_path / "data_other.dat").write_text("1 2 3\n")  # not LF_DEM's naming
-    with pytest.raises(InputError, match="no LF_DEM data_N"):
+    with pytest.raises(InputError, match=r"no LF_DEM data files \(data_N<N>_phi"):
+        reference_points(tmp_path)
+    (tmp_path / "data_conf_params_stress10cl_shear.dat").write_text("1 2 3\n")  # LF_DEM's own naming
+    with pytest.raises(InputError, match="are not named data_N<N>_phi<phi>_s<stress>_disp<disp_max>.dat"):
         reference_points(tmp_path)
 
 

@@ -157,6 +157,12 @@ def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whol
     shipped = sorted(p.name for p in (tmp_path / "models/m").iterdir())
     assert [p for p in shipped if p.startswith("fold")] == ["fold0.ckpt", "fold0.pt"]
     assert "error_model.json" not in shipped and "card.json" in shipped
-    assert registry.list_models() == ["m"]  # no staging folder left, none listed
-    with pytest.raises(InputError, match="plain folder name"):
-        registry.ship(one_fold, "../elsewhere")
+    assert sorted(p.name for p in (tmp_path / "models").iterdir()) == ["m"]  # no staging folder left
+    # a replacement cut between its two renames: the old model is restored, not lost to the next ship
+    (tmp_path / "models/m").rename(tmp_path / "models/.m.replaced")
+    with pytest.raises(InputError, match="a model of that name is shipped"):
+        registry.ship(five_folds, "m")
+    assert registry.list_models() == ["m"] and len(list((tmp_path / "models/m").glob("fold*.pt"))) == 1
+    for bad in ("../elsewhere", ".hidden", "a b"):
+        with pytest.raises(InputError, match="a model name is letters, digits"):
+            registry.ship(one_fold, bad)

@@ -163,6 +163,11 @@ def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
         "model.global_mixing=virtual_node",
         "graph.z_mu_on_count=true",
         "graph.viscosity_on_solve=true",
+        "graph.noise_range=[0.001,0.01]",
+        "graph.noise_copies=2",
+        "graph.relax_strain=0.01",
+        "graph.stress_known=false",
+        "model.on_state_mean=true",
     ):
         changed_overrides = ["~logger", *[o for o in neutral if o.split("=")[0] != override.split("=")[0]]]
         with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):

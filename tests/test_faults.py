@@ -158,12 +158,36 @@ def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp
         ("simulate.py", "sim=n4000", ["sim/n4000", "the options are: lfdem, n2000, n400, tiny"]),
         ("train.py", "model=resgcnn", ["model/resgcnn", "resgcn, resgcn_physics"]),
         ("simulate.py", "sim.phi=[1,2", ["sim.phi=[1,2:"]),
+        (
+            "tune.py",
+            "train_overrides=['data.phii=0.7']",
+            ["tune.train_overrides: data.phii: no such setting"],
+        ),
     ],
 )
 def test_a_misspelled_override_is_one_line_naming_it(tmp_path, script, override, needles):
-    code, out = run([str(ROOT / script), override, f"hydra.run.dir={tmp_path}"], tmp_path)
+    code, out = run(
+        [str(ROOT / script), override, f"hydra.run.dir={tmp_path}", f"output_root={tmp_path}"], tmp_path
+    )
     assert_one_line_error(code, out, f"{script}: error:", *needles)
     assert "+sim" not in out and "HYDRA_FULL_ERROR" not in out  # no advice to add the misspelled key
+
+
+def test_an_omegaconf_error_inside_a_task_keeps_its_traceback(tmp_path):
+    """Only the command line's composition errors become one line: the same error raised by code inside
+    the task (a bug, not a misspelled override) keeps its traceback."""
+    app = tmp_path / "app.py"
+    app.write_text(
+        "import hydra\n"
+        "from rheograph.errors import one_line_errors, run_hydra_app\n"
+        f"@hydra.main(version_base='1.3', config_path={str(ROOT / 'conf')!r}, config_name='train')\n"
+        "def main(cfg):\n"
+        "    with one_line_errors('app.py'):\n"
+        "        return cfg.graph.cutof\n"
+        "run_hydra_app(main, 'app.py')\n"
+    )
+    code, out = run([str(app), f"hydra.run.dir={tmp_path}"], tmp_path)
+    assert code != 0 and "Traceback" in out and "cutof" in out and "app.py: error" not in out
 
 
 def test_hydra_full_error_still_shows_a_composition_traceback(tmp_path):

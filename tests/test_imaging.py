@@ -66,6 +66,7 @@ def test_noisy_graphs_redraw_fresh_noise_and_keep_targets(tiny_files):
     params = {0: snaps.graph_params()}
     fixed = NoisyGraphs(graphs, settings, params, fresh=False, seed=3)
     fresh = NoisyGraphs(graphs, settings, params, fresh=True)
+    torch.manual_seed(0)  # fresh draws follow torch's generator; the RMS check below is a 2.4-sigma band
     a, b = fixed[1], fixed[1]
     assert np.array_equal(a.pos.numpy(), b.pos.numpy())  # validation: one draw per graph
     c, d = fresh[1], fresh[1]
@@ -410,7 +411,7 @@ def test_a_snapshot_whose_relaxation_runs_out_of_steps_is_flagged(monkeypatch):
     )  # fmt: skip
     table = rheograph.load_model("N400_phi0.76_imaging").predict(**values)
     assert table["in_domain"][0] == 0
-    assert "of its 0.01 strain within its step budget in 1 snapshot(s)" in table["notes"][0]
+    assert "relaxation cut short of its 0.01 strain by its step budget" in table["notes"][0]
 
 
 def test_a_snapshot_of_another_system_size_is_flagged_and_names_the_model_trained_at_it():

@@ -82,7 +82,7 @@ def wants_traceback() -> bool:
     return os.environ.get("HYDRA_FULL_ERROR") == "1"
 
 
-def _hydra_error_line(exc: Exception) -> str:
+def hydra_error_line(exc: Exception) -> str:
     """One line for what Hydra or OmegaConf refused while composing a configuration from the command line:
     an unknown key (with the closest known ones), an unknown config option (with the options), or the
     exception's own message with its lines joined."""
@@ -101,7 +101,7 @@ def _hydra_error_line(exc: Exception) -> str:
         close = difflib.get_close_matches(str(key), known, n=3)
         prefix = full_key[: -len(str(key))]
         hint = f"did you mean {' or '.join(prefix + c for c in close)}? " if close else ""
-        return f"{full_key}: no such setting; {hint}`--cfg job` prints every setting"
+        return f"{full_key}: no such setting; {hint}`--cfg job` prints every setting of a command"
     lines = [line.strip().rstrip(".") for line in str(exc).splitlines() if line.strip()]
     override = getattr(exc, "override", None)  # a malformed override: the parser's message does not name it
     return (f"{override}: " if override else "") + ("; ".join(lines) or type(exc).__name__)
@@ -115,14 +115,23 @@ def run_hydra_app(app, program: str):
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    saved = {key: os.environ.get(key) for key in ("RHEOGRAPH_DEBUG", "HYDRA_FULL_ERROR")}
     os.environ["RHEOGRAPH_DEBUG"] = "1" if wants_traceback() else "0"
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it
     try:
         return app()
     except (HydraException, OmegaConfBaseException) as exc:
-        if wants_traceback():
+        # an error from inside the task (one_line_errors marks it) is not the command line's: it keeps
+        # its traceback, as a bug should
+        if wants_traceback() or getattr(exc, "raised_in_task", False):
             raise
-        sys.exit(f"{program}: error: {_hydra_error_line(exc)}")
+        sys.exit(f"{program}: error: {hydra_error_line(exc)}")
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 @contextmanager
@@ -141,6 +150,7 @@ def one_line_errors(program: str):
         ):
             cause = cause.__cause__
         if cause is None or wants_traceback():
+            exc.raised_in_task = True  # for run_hydra_app: not a composition error of the command line
             raise
         message = f"{program}: error: {cause if isinstance(cause, InputError) else _no_room_message(cause)}"
         in_main_process = multiprocessing.current_process().name == "MainProcess"

@@ -113,12 +113,20 @@ def collect(directories) -> list[dict]:
 def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
     """LF_DEM data_N*_phi*_s*_disp*.dat files summarised with the same estimator as rheograph runs."""
     pattern = r"data_N(\d+)_phi([\d.]+)_s([\d.]+)_disp([\d.e-]+)\.dat"
-    files = [(p, re.match(pattern, p.name)) for p in sorted(Path(directory).glob("data_*.dat"))]
-    files = [(p, m) for p, m in files if m]
+    found = sorted(Path(directory).glob("data_*.dat"))
+    files = [(p, m) for p, m in ((p, re.match(pattern, p.name)) for p in found) if m]
     if not files:
+        naming = "data_N<N>_phi<phi>_s<stress>_disp<disp_max>.dat"
         raise InputError(
-            f"--reference {directory}: no LF_DEM data_N<N>_phi<phi>_s<stress>_disp<disp>.dat files there"
-            + ("" if Path(directory).is_dir() else " (no such directory)")
+            f"--reference {directory}: "
+            + (
+                "no such directory"
+                if not Path(directory).is_dir()
+                else f"its data_*.dat files are not named {naming}, the naming the state point is read "
+                "from: rename them"
+                if found
+                else f"no LF_DEM data files ({naming}) there"
+            )
         )
     out = []
     for path, m in files:

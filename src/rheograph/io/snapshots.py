@@ -286,8 +286,13 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     if missing:
         raise InputError(
             f"{where}: missing key(s) {missing}; a bare snapshot file needs {list(required)} "
-            "(docs/data_format.md, 'Bare snapshot files'); physical parameters may instead be given "
-            "beside it (predict.py --param KEY=VALUE, keyword arguments of model.predict)"
+            "(docs/data_format.md, 'Bare snapshot files')"
+            + (
+                "; physical parameters may instead be given beside it (predict.py --param KEY=VALUE, "
+                "keyword arguments of model.predict)"
+                if set(missing) <= set(PHYSICAL_PARAMS)
+                else ""
+            )
         )
     positions = np.asarray(values["positions"], dtype=np.float64)
     if positions.ndim == 2:
@@ -407,6 +412,9 @@ def read_snapshots(
     """The snapshots of any source (module docstring); ``lfdem_params``: LF_DEM's parameter file, for
     LF_DEM runs (``rheograph.io.lfdem.read_lfdem``); ``params``: physical parameters (``sim.*`` names)
     given beside the source, which supply or replace those it carries."""
+    unknown = sorted(set(params or {}) - set(PHYSICAL_PARAMS))
+    if unknown:
+        raise InputError(f"{path}: unknown physical parameter(s) {unknown}; they are {list(PHYSICAL_PARAMS)}")
     snaps = _read_source(path, lfdem_params, params or {})
     if params:
         snaps.params = {**snaps.params, **params}

@@ -34,6 +34,7 @@ share of training trajectories at the nearest trained state point that shear-jam
 from __future__ import annotations
 
 import argparse
+import collections
 import csv
 import dataclasses
 import math
@@ -67,9 +68,14 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
     try:
         bundle = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # a truncated or foreign file: torch raises several types, in many lines
+        text = str(exc).strip()
+        if text.startswith("Weights only load failed"):  # torch's advice to load unsafely does not apply
+            why = "not a torch file of tensors and plain values, as bundles are"
+        else:  # the first sentence: the rest is torch's advice to its own developers
+            why = (text.splitlines() or [type(exc).__name__])[0].split(". ")[0][:160]
         raise InputError(
-            f"{path}: not a readable rheograph model bundle ({type(exc).__name__}); give a shipped model's "
-            "name (predict.py --list-models), a training run directory or one of its fold*.pt"
+            f"{path}: not a readable rheograph model bundle ({why}); a model is a shipped model's name, "
+            "a training run directory or one of its fold*.pt"
         ) from exc
     if not isinstance(bundle, dict) or bundle.get("format") != BUNDLE_FORMAT:
         raise InputError(
@@ -150,10 +156,10 @@ def short_relaxation(graphs, settings: GraphSettings) -> np.ndarray:
 
 def domain_report(
     domain: dict, snaps: Snapshots, graphs, settings: GraphSettings, min_strain: float = 0.0
-) -> tuple[np.ndarray, list[str]]:
-    """Per-snapshot in-domain flags (S,) and the reasons for any snapshot outside; ``min_strain``: the
-    strain from which the model's training snapshots were taken."""
-    reasons = []
+) -> tuple[np.ndarray, list[list[str]]]:
+    """Per-snapshot in-domain flags (S,) and, per snapshot, the reasons it lies outside (empty inside);
+    ``min_strain``: the strain from which the model's training snapshots were taken."""
+    reasons = []  # of every snapshot: the state point, N and the stated precision
     for key, value in (("phi", snaps.phi), ("stress", snaps.stress)):
         if key == "stress" and not np.isfinite(value):  # a positions-only model is not told it
             continue
@@ -174,38 +180,31 @@ def domain_report(
     if reason:
         reason = noise_reason(domain, noise, models_for_noise(snaps.phi, snaps.n_particles, noise))
         reasons.append(reason)
-    flags = np.full(len(graphs), not reasons)
+    rows = [list(reasons) for _ in graphs]
     # the start-up transient (strain below the training data's min_strain) is no steady state: a model
     # trained on steady snapshots misreads it (at strain 0, eta_r by a factor ~3); unknown strain: no flag
     early = (snaps.strain < min_strain) & ~np.asarray(snaps.jammed, dtype=bool)  # training kept arrested ones
-    if early.any():
-        flags[early] = False
-        reasons.append(
-            f"{int(early.sum())} snapshot(s) at strain < {min_strain:g}, the start-up transient the model "
-            "was not trained on (it learned steady flow)"
+    for k in np.flatnonzero(early):
+        rows[k].append(
+            f"strain < {min_strain:g}: the start-up transient, which the model was not trained on (it "
+            "learned steady flow)"
         )
     short = short_relaxation(graphs, settings)
-    if short.any():
-        reached = min(float(g.relaxed_strain) for g, s in zip(graphs, short) if s)
-        flags[short] = False
-        reasons.append(
-            f"relaxation reached {reached:.2g} of its {settings.relax_strain:g} strain within its step "
-            f"budget in {int(short.sum())} snapshot(s) (an arrested or creeping packing): their inputs "
-            "read a partly repaired configuration"
+    for k in np.flatnonzero(short):
+        rows[k].append(
+            f"relaxation cut short of its {settings.relax_strain:g} strain by its step budget (an arrested "
+            "or creeping packing): its inputs read a partly repaired configuration"
         )
-    edge_features = settings.edge_features
+    edge_features = np.asarray(settings.edge_features)
     low, high = np.array(domain["edge_min"]), np.array(domain["edge_max"])
     span = np.maximum(high - low, 1e-12)
-    outside = set()
     for k, g in enumerate(graphs):
         attr = g.edge_attr.numpy()
         bad = (attr.min(axis=0) < low - 0.05 * span) | (attr.max(axis=0) > high + 0.05 * span)
-        if bad.any():
-            flags[k] = False
-            outside.update(np.asarray(edge_features)[bad].tolist())
-    if outside:
-        reason = f"edge features {sorted(outside)} beyond their trained range in some snapshots"
-        if "overlap" in outside and trained_noise(domain)[1] == 0.0:
+        if not bad.any():
+            continue
+        reason = f"edge features {sorted(edge_features[bad].tolist())} beyond their trained range"
+        if "overlap" in edge_features[bad] and trained_noise(domain)[1] == 0.0:
             # an exact model's overlaps are the simulator's at the imposed stress (~1e-3 a); larger ones
             # are what undeclared position noise of ~1e-3 a and more makes
             imaging = models_for_noise(snaps.phi, snaps.n_particles, TRACKING_PRECISION)
@@ -214,8 +213,8 @@ def domain_report(
                 "measured, state their precision (position_noise) and use "
                 + (" or ".join(imaging) if imaging else "an imaging model (predict.py --list-models)")
             )
-        reasons.append(reason)
-    return flags, reasons
+        rows[k].append(reason)
+    return np.array([not r for r in rows], dtype=bool), rows
 
 
 class Surrogate:
@@ -316,13 +315,16 @@ class Surrogate:
             extra["mu_eff_pred"] = (1.0 / per_stress).mean(axis=0)  # sigma / Pi, the bulk friction
             preds[:, :, 1] = per_stress * snaps.stress  # NaN where sigma is unknown
             meta["stress"] = np.full(len(graphs), snaps.stress)
-        in_domain, reasons = domain_report(self.domain, snaps, graphs, self.settings, self.min_strain)
-        if notes:
-            in_domain[:] = False
-        reasons = notes + reasons
-        if reasons:
+        in_domain, row_reasons = domain_report(self.domain, snaps, graphs, self.settings, self.min_strain)
+        row_reasons = [notes + r for r in row_reasons]
+        in_domain &= not notes
+        if not in_domain.all():
+            # each reason once, with how many snapshots it concerns where that is not all of them
+            counts = collections.Counter(reason for r in row_reasons for reason in r)
+            n = len(graphs)
+            summary = [text if k == n else f"{text} ({k} of {n} snapshots)" for text, k in counts.items()]
             print(
-                f"warning: {snaps.source}: outside model {self.label}'s domain: " + "; ".join(reasons),
+                f"warning: {snaps.source}: outside model {self.label}'s domain: " + "; ".join(summary),
                 file=sys.stderr,
             )
         n = len(graphs)
@@ -333,7 +335,7 @@ class Surrogate:
             "stress": meta["stress"],
             "phi": meta["phi"],
             "in_domain": in_domain.astype(np.int64),
-            "notes": np.array(["; ".join(reasons) if not ok or notes else "" for ok in in_domain]),
+            "notes": np.array(["; ".join(r) for r in row_reasons]),
         }
         out.update(extra)
         if "jam_map" in self.domain and not positions_only:

@@ -1,7 +1,8 @@
 """Shipped surrogate models: named ensembles of fold bundles with a model card, inside the package
 (``rheograph/models/<name>/``: ``fold*.pt``, ``error_model.json``, ``card.json``, ``card.md``).
 
-    python -m rheograph.learn.registry ship docs/results/surrogate_per_phi/N400_phi0.76 --name N400_phi0.76
+    python -m rheograph.learn.registry ship docs/results/pressure_on_spring/N400_phi0.76 \
+        --name N400_phi0.76 --replace
     python predict.py --list-models
 
 ``ship`` makes a named model out of a training run directory: its fold bundles, completed where a run of
@@ -279,41 +280,50 @@ def ship(run_dir: str | Path, name: str, replace: bool = False) -> Path:
     """Makes ``rheograph/models/<name>/`` from the training run ``run_dir``.  A model already shipped
     under ``name`` is kept unless ``replace``; then the new one is built beside it and swapped in whole,
     so that no folder ever mixes the folds, error model or card of two runs."""
+    import re
+    import tempfile
+
     run_dir = Path(run_dir)
     bundles = sorted(run_dir.glob("fold*.pt"))
     if not bundles:
         raise InputError(f"{run_dir}: no fold*.pt bundles")
-    if not name or name.startswith(".") or Path(name).name != name:
-        raise InputError(f"--name {name!r}: a model name is a plain folder name (letters, digits, _ - .)")
-    directory = MODELS_DIR / name
+    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", name):
+        raise InputError(
+            f"--name {name!r}: a model name is letters, digits, _ - . (not starting with . or -)"
+        )
+    directory, retired = MODELS_DIR / name, MODELS_DIR / f".{name}.replaced"
+    if retired.exists() and not directory.exists():  # a replacement cut between its two renames
+        retired.rename(directory)
     if directory.exists() and not replace:
         raise InputError(
             f"--name {name}: a model of that name is shipped ({directory}); pick another name, or add "
             "--replace to replace it whole"
         )
-    staging = MODELS_DIR / f".{name}.shipping"
-    shutil.rmtree(staging, ignore_errors=True)  # from an interrupted ship
-    staging.mkdir(parents=True)
-    first = None
-    for path in bundles:
-        bundle = torch.load(path, map_location="cpu", weights_only=True)
-        bundle = _complete_bundle(bundle, path.with_name(path.stem + "_split.json"))
-        buffer = io.BytesIO()
-        torch.save(bundle, buffer)
-        (staging / path.name).write_bytes(buffer.getvalue())
-        write_lightning_checkpoint(bundle, staging / f"{path.stem}.ckpt")
-        first = first or bundle
-    if (run_dir / "error_model.json").is_file():
-        shutil.copy(run_dir / "error_model.json", staging / "error_model.json")
-    write_card(staging, name, run_dir, first)
-    if directory.exists():
-        retired = MODELS_DIR / f".{name}.replaced"
-        shutil.rmtree(retired, ignore_errors=True)
-        directory.rename(retired)
-        staging.rename(directory)
-        shutil.rmtree(retired)
-    else:
-        staging.rename(directory)
+    MODELS_DIR.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.shipping.", dir=MODELS_DIR))
+    try:
+        first = None
+        for path in bundles:
+            bundle = torch.load(path, map_location="cpu", weights_only=True)
+            bundle = _complete_bundle(bundle, path.with_name(path.stem + "_split.json"))
+            buffer = io.BytesIO()
+            torch.save(bundle, buffer)
+            (staging / path.name).write_bytes(buffer.getvalue())
+            write_lightning_checkpoint(bundle, staging / f"{path.stem}.ckpt")
+            first = first or bundle
+        if (run_dir / "error_model.json").is_file():
+            shutil.copy(run_dir / "error_model.json", staging / "error_model.json")
+        write_card(staging, name, run_dir, first)
+        staging.chmod(0o755)  # mkdtemp's 0700 would hide the model from other users of an installation
+        if directory.exists():
+            shutil.rmtree(retired, ignore_errors=True)
+            directory.rename(retired)
+            staging.rename(directory)
+            shutil.rmtree(retired)
+        else:
+            staging.rename(directory)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)  # gone already where the model was shipped
     return directory
 
 

@@ -127,9 +127,15 @@ def check_base_config(cfg: DictConfig) -> None:
     """Bad input in the study's fixed overrides (a glob matching nothing, an invalid data, graph, model
     or trainer option) would fail every trial; it ends the study before the first one instead, as one
     line (InputError)."""
+    from hydra.errors import HydraException
+
+    from rheograph.errors import hydra_error_line
     from rheograph.learn.train import check_run_settings, graph_settings, setup_fold
 
-    train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
+    try:
+        train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
+    except HydraException as exc:  # a misspelled key or option among them: named, as at train.py
+        raise InputError(f"tune.train_overrides: {hydra_error_line(exc)}") from exc
     check_run_settings(train_cfg)
     setup_fold(train_cfg, 0, graph_settings(train_cfg))  # data, graphs and the model's own options
     for name, spec in OmegaConf.to_container(cfg.tune.search_space, resolve=True).items():
