@@ -516,6 +516,11 @@ def test_start_up_snapshots_are_flagged_outside_a_steady_state_model(tmp_path):
     assert in_domain[~early].all() and not any(notes[~early])  # the note belongs to its rows only
 
 
+def test_read_snapshots_refuses_an_unknown_parameter_given_beside_the_file():
+    with pytest.raises(InputError, match=r"unknown physical parameter\(s\) \['colour'\]"):
+        read_snapshots(PAR, params={"colour": 1.0})
+
+
 def test_predict_cli_refuses_negative_noise_and_a_file_that_is_no_model(tmp_path):
     from rheograph.learn.predict import main
 
