@@ -266,3 +266,19 @@ def test_a_failing_trial_does_not_stop_the_study_and_the_best_is_written_then_re
         resumed = run_study(more, tmp_path / "trials", objective=objective)
         assert len(resumed.trials) == 4  # tune.n_trials counts finished trials, failed ones included
         assert resumed.trials[0].params == study.trials[0].params
+        # a resumed study draws afresh: its new trial does not replay the first invocation's first draw
+        assert resumed.trials[3].params != study.trials[0].params
+        # as does another worker of a shared study, from the start
+        other = compose(
+            config_name="tune",
+            overrides=[
+                *overrides[:-1],
+                "tune.n_trials=1",
+                "tune.worker=1",
+                f"tune.storage=sqlite:///{tmp_path}/w.db",
+            ],
+        )
+        assert (
+            run_study(other, tmp_path / "trials_w1", objective=objective).trials[0].params
+            != study.trials[0].params
+        )

@@ -22,6 +22,8 @@ CLIS = (
     ("python -m rheograph.dataset_card", "rheograph.dataset_card"),
     ("python -m rheograph.jamming_points", "rheograph.jamming_points"),
     ("python -m rheograph.learn.registry", "rheograph.learn.registry"),
+    ("python -m rheograph.respace", "rheograph.respace"),
+    ("rheograph", "rheograph.console"),
 )
 
 

@@ -108,6 +108,9 @@ def make_objective(cfg: DictConfig, run_root: Path):
             return [reporters[-1]]
 
         trial_dir = run_root / f"trial_{trial.number:04d}"
+        if train_cfg.get("logger") and "save_dir" in train_cfg.logger:
+            # TensorBoard per trial (folds as versions): the hparams tab shows one entry per trial and fold
+            train_cfg.logger.save_dir = str(trial_dir)
         try:
             summary = train_folds(train_cfg, trial_dir, fold_callbacks)
         finally:  # a pruned, failed or killed trial is retried under a new number: its resume state is dead
@@ -130,13 +133,14 @@ def check_base_config(cfg: DictConfig) -> None:
     from hydra.errors import HydraException
 
     from rheograph.errors import hydra_error_line
-    from rheograph.learn.train import check_run_settings, graph_settings, setup_fold
+    from rheograph.learn.train import check_run_settings, ensure_dataset, graph_settings, setup_fold
 
     try:
         train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
     except HydraException as exc:  # a misspelled key or option among them: named, as at train.py
         raise InputError(f"tune.train_overrides: {hydra_error_line(exc)}") from exc
     check_run_settings(train_cfg)
+    ensure_dataset(train_cfg)  # debug=tiny simulates its data on first use, as under train.py
     setup_fold(train_cfg, 0, graph_settings(train_cfg))  # data, graphs and the model's own options
     for name, spec in OmegaConf.to_container(cfg.tune.search_space, resolve=True).items():
         if spec.get("type") not in ("categorical", "int", "float"):
@@ -158,6 +162,14 @@ def check_study_space(study: optuna.Study, space: dict) -> None:
                 f"{sorted(trial.params)}, this search space is {sorted(names)}; choose another "
                 "tune.study_name (or tune.storage) for a different search"
             )
+
+
+def sampler_seed(tune_cfg: DictConfig, trials_so_far: int) -> int:
+    """The TPE sampler's seed for one invocation: ``tune.sampler_seed`` for a new study (reproducible), mixed
+    with the number of trials the study already holds and ``tune.worker``, so that a resumed study and
+    the workers of a shared one do not replay the same random start-up configurations."""
+    words = [int(tune_cfg.sampler_seed), int(trials_so_far), int(tune_cfg.get("worker", 0))]
+    return int(np.random.SeedSequence(words).generate_state(1)[0])
 
 
 def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
@@ -186,11 +198,11 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
         storage=storage,
         load_if_exists=True,
         direction=t.direction,
-        sampler=optuna.samplers.TPESampler(seed=t.sampler_seed),
         pruner=optuna.pruners.MedianPruner(
             n_startup_trials=t.pruner.n_startup_trials, n_warmup_steps=t.pruner.n_warmup_steps
         ),
     )
+    study.sampler = optuna.samplers.TPESampler(seed=sampler_seed(t, len(study.trials)))
     check_study_space(study, OmegaConf.to_container(t.search_space, resolve=True))
     if t.get("enqueue_defaults") and objective is None:
         enqueue_defaults(study, cfg)

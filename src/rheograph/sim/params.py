@@ -1,4 +1,7 @@
-"""Simulation parameters with validation.  Defaults follow physics.md (LF_DEM's CLM 2D set-up)."""
+"""Simulation parameters with validation.  The physical defaults are physics.md's (LF_DEM's CLM 2D set-up);
+the numerical ones (explicit Euler at disp_max 1e-3, a snapshot every 0.5 strain) are LF_DEM's, which
+files written without them resume with.  The command line's default preset ``sim=n400`` (``conf/sim/``)
+selects the converged numerics: ``integrator="implicit"``, ``disp_max=2e-3``, ``snapshot_interval=0.1``."""
 
 from __future__ import annotations
 
@@ -30,7 +33,8 @@ class ParameterError(InputError):
 
 @dataclass(frozen=True)
 class SimParams:
-    """All physical and numerical parameters of one state point.
+    """All physical and numerical parameters of one state point (numerical defaults: LF_DEM's explicit
+    scheme; pass ``integrator="implicit", disp_max=2e-3`` for the converged numerics of ``sim=n400``).
 
     Units: length a (small radius), force F_CL, stress sigma0 = F_CL/(6 pi a^2), time 6 pi eta0 a^2 / F_CL.
     """
