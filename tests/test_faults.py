@@ -158,6 +158,7 @@ def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp
         ("simulate.py", "sim=n4000", ["sim/n4000", "the options are: lfdem, n2000, n400, tiny"]),
         ("train.py", "model=resgcnn", ["model/resgcnn", "resgcn, resgcn_physics"]),
         ("simulate.py", "sim.phi=[1,2", ["sim.phi=[1,2:"]),
+        ("simulate.py", "--cfg=hydra -m", ["Only one of --run, --multirun, --cfg"]),
         (
             "tune.py",
             "train_overrides=['data.phii=0.7']",
@@ -167,7 +168,8 @@ def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp
 )
 def test_a_misspelled_override_is_one_line_naming_it(tmp_path, script, override, needles):
     code, out = run(
-        [str(ROOT / script), override, f"hydra.run.dir={tmp_path}", f"output_root={tmp_path}"], tmp_path
+        [str(ROOT / script), *override.split(), f"hydra.run.dir={tmp_path}", f"output_root={tmp_path}"],
+        tmp_path,
     )
     assert_one_line_error(code, out, f"{script}: error:", *needles)
     assert "+sim" not in out and "HYDRA_FULL_ERROR" not in out  # no advice to add the misspelled key

@@ -8,6 +8,7 @@ import multiprocessing
 import os
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 
 NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)  # disk full, quota reached, file-size limit
 
@@ -107,6 +108,14 @@ def hydra_error_line(exc: Exception) -> str:
     return (f"{override}: " if override else "") + ("; ".join(lines) or type(exc).__name__)
 
 
+def _raised_in_hydra(exc: BaseException) -> bool:
+    """Whether ``exc`` was raised by Hydra's own code (its last traceback frame lies in the package)."""
+    tb = exc.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb is not None and "hydra" in Path(tb.tb_frame.f_code.co_filename).parts
+
+
 def run_hydra_app(app, program: str):
     """Runs a ``@hydra.main`` function: what Hydra refuses while composing the configuration from the
     command line (a misspelled key, an unknown config option, a malformed override) ends the program with
@@ -120,10 +129,14 @@ def run_hydra_app(app, program: str):
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it
     try:
         return app()
-    except (HydraException, OmegaConfBaseException) as exc:
+    except (HydraException, OmegaConfBaseException, ValueError) as exc:
         # an error from inside the task (one_line_errors marks it) is not the command line's: it keeps
-        # its traceback, as a bug should
-        if wants_traceback() or getattr(exc, "raised_in_task", False):
+        # its traceback, as a bug should; of ValueErrors only Hydra's own (conflicting flags) are
+        if (
+            wants_traceback()
+            or getattr(exc, "raised_in_task", False)
+            or (isinstance(exc, ValueError) and not _raised_in_hydra(exc))
+        ):
             raise
         sys.exit(f"{program}: error: {hydra_error_line(exc)}")
     finally:
