@@ -20,7 +20,7 @@ from rheograph.graphs.features import forward_transform, inverse_transform, snap
 from rheograph.io.snapshots import read_snapshots
 from rheograph.learn.datamodule import SnapshotDataModule, kfold_assignment
 from rheograph.learn.model import ResGCN
-from rheograph.learn.module import warmup_cosine
+from rheograph.learn.module import SurrogateModule, warmup_cosine
 from rheograph.sim.geometry import minimum_image, pair_geometry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -1201,3 +1201,32 @@ def test_the_composed_model_config_trains_with_partial_optimiser_and_schedule():
     assert configured["optimizer"].param_groups[0]["lr"] == pytest.approx(1e-3 / 6)  # warm-up over 5 epochs
     with pytest.raises(InputError, match="model.optimizer is not set"):
         SurrogateModule(**dict(module.hparams)).configure_optimizers()
+
+
+class OffsetNetwork(SurrogateModule):
+    """Another network, as docs/howto/extend.md plugs one in: the options' ResGCN plus a learned offset
+    (a parameter of its own, absent from SurrogateModule's state)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.offset = torch.nn.Parameter(torch.zeros(3))
+
+    def _net(self, batch):
+        return super()._net(batch) + self.offset
+
+
+def test_a_subclassed_network_trains_and_predict_serves_it_as_itself(tiny_files, tmp_path):
+    """``model._target_`` naming a SurrogateModule subclass: trained like the default, and its fold
+    bundles are rebuilt as that class (its own parameters loaded) by load_model / predict.py."""
+    from rheograph.learn.predict import load_model
+    from rheograph.learn.train import train_folds
+
+    base = [*quick_folds(tiny_files, tmp_path), "report=false", "threads=1", "fold=0"]
+    train_folds(compose_train([*base, f"model._target_={__name__}.OffsetNetwork"]), tmp_path / "run")
+    model = load_model(tmp_path / "run")
+    (module, _, _), *_ = model.models
+    assert type(module).__name__ == "OffsetNetwork"
+    trained = torch.load(tmp_path / "run" / "fold0.pt", weights_only=True)["state_dict"]["offset"]
+    assert torch.equal(module.offset.detach(), trained) and trained.abs().sum() > 0
+    table = model.predict_snapshots(read_snapshots(tiny_files[0]))
+    assert np.isfinite(table["eta_pred"]).all()

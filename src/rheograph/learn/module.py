@@ -65,11 +65,13 @@ def check_training_factories(optimizer, scheduler) -> None:
             raise InputError(f"model.scheduler={_describe(scheduler)} is invalid: {err}") from None
 
 
-def network_hparams(hparams: dict) -> dict:
-    """The keys of ``hparams`` that ``SurrogateModule`` takes: bundles of older versions also hold
-    their optimiser settings, which a trained network does not need (as Lightning's
-    ``load_from_checkpoint`` drops keys the constructor does not take)."""
-    accepted = inspect.signature(SurrogateModule.__init__).parameters
+def network_hparams(hparams: dict, module_class: type | None = None) -> dict:
+    """The keys of ``hparams`` that ``module_class`` (``SurrogateModule`` or a subclass; their
+    constructors' parameters together) takes: bundles of older versions also hold their optimiser
+    settings, which a trained network does not need (as Lightning's ``load_from_checkpoint`` drops keys
+    the constructor does not take)."""
+    classes = [c for c in (module_class or SurrogateModule).__mro__ if issubclass(c, SurrogateModule)]
+    accepted = {name for c in classes for name in inspect.signature(c.__init__).parameters}
     return {k: v for k, v in hparams.items() if k in accepted}
 
 

@@ -37,6 +37,7 @@ import argparse
 import collections
 import csv
 import dataclasses
+import importlib
 import math
 import sys
 from pathlib import Path
@@ -63,6 +64,27 @@ EXACT_POSITION_PRECISION = 3e-5
 TRACKING_PRECISION = 0.01
 
 
+def _module_class(path, name: str | None) -> type:
+    """The LightningModule class a bundle was trained with: ``SurrogateModule`` or a subclass of it
+    (``module:qualname``, importable where the prediction runs); bundles without the record are
+    ``SurrogateModule``'s."""
+    if not name:
+        return SurrogateModule
+    module_name, _, qualname = name.partition(":")
+    try:
+        found = importlib.import_module(module_name)
+        for part in qualname.split("."):
+            found = getattr(found, part)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(
+            f"{path}: its network class {name} cannot be imported here ({exc}); install or put on the "
+            "Python path the package that defines it"
+        ) from exc
+    if not (isinstance(found, type) and issubclass(found, SurrogateModule)):
+        raise InputError(f"{path}: its network class {name} is not a SurrogateModule")
+    return found
+
+
 def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]:
     """(module, graph settings, training domain) of a bundle written by ``train.save_bundle``."""
     try:
@@ -82,7 +104,8 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
             f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
             "retrained"
         )
-    module = SurrogateModule(**network_hparams(bundle["hparams"]))
+    module_class = _module_class(path, bundle.get("module_class"))
+    module = module_class(**network_hparams(bundle["hparams"], module_class))
     module.load_state_dict(bundle["state_dict"])
     module.eval()
     graph = dict(bundle["graph"])

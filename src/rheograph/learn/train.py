@@ -92,6 +92,8 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
     torch.save(
         {
             "format": BUNDLE_FORMAT,
+            # a subclass of SurrogateModule (another network) is rebuilt as itself
+            "module_class": f"{type(module).__module__}:{type(module).__qualname__}",
             "state_dict": module.state_dict(),
             "hparams": hp,
             "graph": {
