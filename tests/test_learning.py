@@ -1230,3 +1230,20 @@ def test_a_subclassed_network_trains_and_predict_serves_it_as_itself(tiny_files,
     assert torch.equal(module.offset.detach(), trained) and trained.abs().sum() > 0
     table = model.predict_snapshots(read_snapshots(tiny_files[0]))
     assert np.isfinite(table["eta_pred"]).all()
+
+
+class NarrowNetwork(SurrogateModule):
+    """A subclass with an explicit signature of its own (its hparams also hold SurrogateModule's)."""
+
+    def __init__(self, width: int = 8, edge_in: int = 6):
+        super().__init__(hidden=width, edge_in=edge_in)
+
+
+def test_network_hparams_rebuild_subclasses_with_their_own_signature():
+    from rheograph.learn.module import network_hparams
+
+    narrow = NarrowNetwork(width=16)
+    kwargs = network_hparams(dict(narrow.hparams), NarrowNetwork)
+    assert set(kwargs) <= {"width", "edge_in"} and NarrowNetwork(**kwargs).hparams["hidden"] == 16
+    offset = OffsetNetwork(edge_in=6, hidden=16)  # **kwargs passed on: SurrogateModule's options too
+    assert OffsetNetwork(**network_hparams(dict(offset.hparams), OffsetNetwork)).hparams["hidden"] == 16

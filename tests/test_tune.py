@@ -217,10 +217,36 @@ def test_a_study_resumed_with_another_search_space_is_refused_by_name():
             value=0.1,
         )
     )
-    same = {"model.optimizer.lr": {"type": "float"}, "graph.viscosity_on_solve": {"type": "categorical"}}
+    same = {
+        "model.optimizer.lr": {"type": "float"},
+        "graph.viscosity_on_solve": {"type": "categorical", "choices": [False, True]},
+    }
     check_study_space(study, same)  # the space its trials searched: resumed
     with pytest.raises(InputError, match="tune.study_name='physics_solve_phi076'.*graph.viscosity_on_solve"):
         check_study_space(study, {"model.optimizer.lr": {"type": "float"}})
+    # one more choice: Optuna would fail every new trial; refused by name instead
+    more = {**same, "graph.viscosity_on_solve": {"type": "categorical", "choices": [False, True, None]}}
+    with pytest.raises(InputError, match="graph.viscosity_on_solve choices are \\['False', 'True'\\]"):
+        check_study_space(study, more)
+
+
+def test_sampler_seeds_are_reproducible_distinct_per_resume_and_worker_and_validated():
+    from omegaconf import OmegaConf
+
+    from rheograph.learn.tune import sampler_seed
+
+    tune = OmegaConf.create({"sampler_seed": 0, "worker": 0})
+    assert sampler_seed(tune, 0) == sampler_seed(tune, 0)
+    seeds = {
+        sampler_seed(tune, 0),
+        sampler_seed(tune, 3),
+        sampler_seed(OmegaConf.merge(tune, {"worker": 1}), 0),
+    }
+    assert len(seeds) == 3
+    assert sampler_seed(OmegaConf.merge(tune, {"sampler_seed": None}), 5) is None
+    for bad in ({"worker": -1}, {"worker": "host-a"}, {"sampler_seed": 1.5}):
+        with pytest.raises(InputError, match="tune.(worker|sampler_seed)="):
+            sampler_seed(OmegaConf.merge(tune, bad), 0)
 
 
 def test_a_failing_trial_does_not_stop_the_study_and_the_best_is_written_then_resumed(tmp_path):

@@ -70,8 +70,14 @@ def network_hparams(hparams: dict, module_class: type | None = None) -> dict:
     constructors' parameters together) takes: bundles of older versions also hold their optimiser
     settings, which a trained network does not need (as Lightning's ``load_from_checkpoint`` drops keys
     the constructor does not take)."""
-    classes = [c for c in (module_class or SurrogateModule).__mro__ if issubclass(c, SurrogateModule)]
-    accepted = {name for c in classes for name in inspect.signature(c.__init__).parameters}
+    module_class = module_class or SurrogateModule
+    own = inspect.signature(module_class.__init__).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in own.values()):
+        # a subclass passing **kwargs on: its own parameters and those of the classes it passes them to
+        classes = [c for c in module_class.__mro__ if issubclass(c, SurrogateModule)]
+        accepted = {name for c in classes for name in inspect.signature(c.__init__).parameters}
+    else:  # an explicit signature: only what it takes (the hparams also hold its parent's)
+        accepted = set(own)
     return {k: v for k, v in hparams.items() if k in accepted}
 
 

@@ -66,11 +66,20 @@ TRACKING_PRECISION = 0.01
 
 def _module_class(path, name: str | None) -> type:
     """The LightningModule class a bundle was trained with: ``SurrogateModule`` or a subclass of it
-    (``module:qualname``, importable where the prediction runs); bundles without the record are
-    ``SurrogateModule``'s."""
+    (``module:qualname``); bundles without the record are ``SurrogateModule``'s.  A class not imported
+    yet is imported by its module's name: an installed module (the bundle itself carries no code), whose
+    import runs that module, as loading the model in Python would."""
     if not name:
         return SurrogateModule
     module_name, _, qualname = name.partition(":")
+    subclasses, seen = list(SurrogateModule.__subclasses__()), []
+    while subclasses:  # already imported: no import needed
+        cls = subclasses.pop()
+        seen.append(cls)
+        subclasses += cls.__subclasses__()
+    for cls in seen:
+        if cls.__module__ == module_name and cls.__qualname__ == qualname:
+            return cls
     try:
         found = importlib.import_module(module_name)
         for part in qualname.split("."):

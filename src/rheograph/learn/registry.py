@@ -139,6 +139,8 @@ def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_di
         "physical_params": domain["physical_params"],
         "solve_numerics": domain["solve_numerics"],
         "position_noise": domain.get("position_noise", 0.0),
+        # another network than SurrogateModule's own: its class must be importable where the model is used
+        "module_class": bundle.get("module_class"),
         "on_state_mean": bool(bundle["hparams"].get("on_state_mean", False)),
         "held_out_r2": _score_rows(metrics),
     }
@@ -230,7 +232,12 @@ def card_markdown(card: dict) -> str:
             )
         )
     lines += [
-        "* Learned: the message-passing network and its head (η_r, Π, Z_μ).",
+        "* Learned: the message-passing network and its head (η_r, Π, Z_μ)"
+        + (
+            f" — class `{card['module_class']}`, which must be importable where the model is used."
+            if card.get("module_class")
+            else "."
+        ),
         "",
         "## Held-out R² (mean over folds)",
         "",
@@ -260,8 +267,8 @@ def card_markdown(card: dict) -> str:
 
 def write_lightning_checkpoint(bundle: dict, path: Path) -> None:
     """The weights and hyperparameters of a fold bundle as a Lightning checkpoint at ``path``:
-    ``SurrogateModule.load_from_checkpoint(path)`` rebuilds the module (the graph settings and the
-    trained domain stay in the bundle)."""
+    ``SurrogateModule.load_from_checkpoint(path)`` (or that of the class the card names) rebuilds the
+    module (the graph settings and the trained domain stay in the bundle)."""
     import lightning as L
 
     buffer = io.BytesIO()

@@ -27,6 +27,7 @@ from rheograph.learn.module import (
     TARGET_NAMES,
     EpochLog,
     FoldResumePoint,
+    SurrogateModule,
     check_training_factories,
     fold_metrics,
     physical_targets,
@@ -92,8 +93,11 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
     torch.save(
         {
             "format": BUNDLE_FORMAT,
-            # a subclass of SurrogateModule (another network) is rebuilt as itself
-            "module_class": f"{type(module).__module__}:{type(module).__qualname__}",
+            # a subclass of SurrogateModule (another network) is rebuilt as itself; SurrogateModule's own
+            # bundles carry no class name, so that they outlive a move of its module
+            "module_class": None
+            if type(module) is SurrogateModule
+            else f"{type(module).__module__}:{type(module).__qualname__}",
             "state_dict": module.state_dict(),
             "hparams": hp,
             "graph": {

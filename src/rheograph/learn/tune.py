@@ -162,13 +162,32 @@ def check_study_space(study: optuna.Study, space: dict) -> None:
                 f"{sorted(trial.params)}, this search space is {sorted(names)}; choose another "
                 "tune.study_name (or tune.storage) for a different search"
             )
+        # Optuna refuses other choices of a categorical parameter for every new trial (each would fail)
+        for name, stored in trial.distributions.items():
+            spec = space[name]
+            choices = tuple(str(c) for c in spec.get("choices", ()))
+            if spec["type"] == "categorical" and tuple(getattr(stored, "choices", ())) != choices:
+                raise InputError(
+                    f"tune.study_name={study.study_name!r}: the stored study's {name} choices are "
+                    f"{list(stored.choices)}, this search space's {list(choices)}; a study keeps its "
+                    "choices: choose another tune.study_name for a different search"
+                )
 
 
-def sampler_seed(tune_cfg: DictConfig, trials_so_far: int) -> int:
+def sampler_seed(tune_cfg: DictConfig, trials_so_far: int) -> int | None:
     """The TPE sampler's seed for one invocation: ``tune.sampler_seed`` for a new study (reproducible), mixed
     with the number of trials the study already holds and ``tune.worker``, so that a resumed study and
     the workers of a shared one do not replay the same random start-up configurations."""
-    words = [int(tune_cfg.sampler_seed), int(trials_so_far), int(tune_cfg.get("worker", 0))]
+    worker = tune_cfg.get("worker", 0)
+    if not isinstance(worker, int) or worker < 0:
+        raise InputError(
+            f"tune.worker={worker!r} is invalid: an integer >= 0, one per worker of a shared study"
+        )
+    if tune_cfg.sampler_seed is None:  # unseeded: every invocation draws afresh
+        return None
+    if not isinstance(tune_cfg.sampler_seed, int) or tune_cfg.sampler_seed < 0:
+        raise InputError(f"tune.sampler_seed={tune_cfg.sampler_seed!r} is invalid: an integer >= 0, or null")
+    words = [tune_cfg.sampler_seed, int(trials_so_far), worker]
     return int(np.random.SeedSequence(words).generate_state(1)[0])
 
 
