@@ -110,10 +110,13 @@ def hydra_error_line(exc: Exception) -> str:
 
 def _raised_in_hydra(exc: BaseException) -> bool:
     """Whether ``exc`` was raised by Hydra's own code (its last traceback frame lies in the package)."""
+    import hydra
+
     tb = exc.__traceback__
     while tb is not None and tb.tb_next is not None:
         tb = tb.tb_next
-    return tb is not None and "hydra" in Path(tb.tb_frame.f_code.co_filename).parts
+    package = Path(hydra.__file__).resolve().parent
+    return tb is not None and package in Path(tb.tb_frame.f_code.co_filename).resolve().parents
 
 
 def run_hydra_app(app, program: str):
