@@ -66,6 +66,12 @@ def state_means(paths: list[str], min_strain: float) -> dict:
     for path in files:
         snaps = read_snapshots(path)
         keep = (snaps.strain >= min_strain) & ~snaps.jammed
+        if np.any(snaps.targets[keep, :2] <= 0.0):  # the lookup is a geometric mean
+            first = float(snaps.strain[keep][np.any(snaps.targets[keep, :2] <= 0.0, axis=1)][0])
+            sys.exit(
+                f"lfdem_snapshots: --lookup {path} has η_r or Π <= 0 at strain {first:.3g} (a start-up "
+                f"transient): raise --min-strain"
+            )
         key = (round(float(snaps.stress), 9), round(snaps.phi, 6), snaps.n_particles)
         pooled.setdefault(key, []).append(snaps.targets[keep])
     means = {}

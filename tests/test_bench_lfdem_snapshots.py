@@ -52,8 +52,12 @@ def test_lfdem_snapshots_lookup_is_the_rheograph_mean_at_the_stress():
     # two state points at one stress are not one lookup
     with pytest.raises(SystemExit, match="mixes state points"):
         bench.state_means([str(multirun / "N*_phi0.76_s10_seed1_*/trajectory.h5")], min_strain=1.0)
-    args = ["--runs", str(PAR), "--model", "N400_phi0.76", "--min-strain", "0", "--timing-snapshots", "2",
+    args = ["--runs", str(PAR), "--model", "N400_phi0.76", "--min-strain", "0.05", "--timing-snapshots", "2",
             "--no-write"]  # fmt: skip
+    # the start of a run can hold Π <= 0, which has no logarithm: the lookup asks for a later window
+    start = [*args[:4], "--min-strain", "0", *args[6:]]
+    with pytest.raises(SystemExit, match="Π <= 0 at strain 0 .*raise --min-strain"):
+        bench.main([*start, "--lookup", str(multirun / "N400_phi0.76_s10_seed1_*/trajectory.h5")])
     # the fixture run is N = 100: a lookup of N = 400 runs is another state point
     with pytest.raises(SystemExit, match="N = 400; .* N = 100"):
         bench.main([*args, "--lookup", str(multirun / "N400_phi0.76_s10_seed*/trajectory.h5")])

@@ -637,7 +637,7 @@ def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
     batch = Batch.from_data_list(graphs)
     module = SurrogateModule(edge_in=6).eval()
     logged = {}
-    module.log = lambda name, value, **k: logged.__setitem__(name, float(value))
+    module.log = lambda name, value, **k: logged.__setitem__(name, float(value.detach()))
 
     def step(b):
         loss = module._step(b, "val")
