@@ -87,4 +87,5 @@ cards: install
 	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1   # N = 8000" \
 	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1 sim.n_particles=20000" \
 	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1   # phi 0.80, N = 8000" \
-	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1 sim.stress=20 sim.seed=2"
+	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1 sim.stress=20 sim.seed=2" \
+	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1 sim.n_particles=20000 sim.stress=20"
