@@ -37,8 +37,9 @@ def table(points, min_sizes: int) -> list[str]:
     for p in points:
         by_state[(p["phi"], p["mu"], p["stress"], p["disp_max"], p["integrator"])].append(p)
     lines = [
-        "| φ | μ | σ/σ0 | scheme | disp_max | N | runs (arrested) | strain | η_r | Π/σ0 | Z_μ |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| φ | μ | σ/σ0 | scheme | disp_max | N | runs (arrested) | strain | η_r | Π/σ0 | Z_μ "
+        "| slowest γ̇ η0/σ0 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (phi, mu, stress, disp, scheme), members in sorted(by_state.items()):
         if len({p["n_particles"] for p in members}) < min_sizes:
@@ -48,7 +49,8 @@ def table(points, min_sizes: int) -> list[str]:
                 f"| {phi:g} | {mu:g} | {stress:g} | {scheme} | {disp:g} | {p['n_particles']} | "
                 f"{p['n_runs']} ({p['n_jammed']}) | "
                 f"{p['strain']:.2f} | {fmt(p['viscosity'], p['viscosity_se'])} | "
-                f"{fmt(p['pressure'], p['pressure_se'])} | {fmt(p['z_mu'], p['z_mu_se'])} |"
+                f"{fmt(p['pressure'], p['pressure_se'])} | {fmt(p['z_mu'], p['z_mu_se'])} | "
+                f"{p['slowest_rate']:.2g} |"
             )
     return lines
 
@@ -106,7 +108,8 @@ def main(argv=None) -> int:
     lines = [
         f"Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at "
         f"{args.min_sizes} or more N; mean ± error over seeds and strain blocks; arrested runs counted, "
-        "not averaged into η_r (— where every run arrested).",
+        "not averaged into η_r (— where every run arrested); slowest γ̇: the lowest shear rate any flowing "
+        "run of the state point reached in that window (how close the flow came to arresting).",
         "",
         *table(points, args.min_sizes),
         "",

@@ -195,6 +195,28 @@ def test_a_seed_held_by_two_sweeps_counts_once_with_its_longer_run(tmp_path):
         assert both[key] == alone[key]
 
 
+def test_slowest_shear_rate_is_the_minimum_over_the_flowing_seeds_steady_windows(tmp_path):
+    """phi = 0.80, sigma/sigma0 = 20 at N = 400: two seeds arrest, one flows.  The slowest flow of the
+    state point is the lowest shear rate of the flowing seed at strain >= its steady_state_strain (the
+    arrested seeds' rates fall to zero and do not count), below its mean rate sigma/eta_r."""
+    import shutil
+
+    from rheograph.flowcurve import collect
+    from rheograph.io.hdf5 import read_params, read_run_info, read_timeseries
+
+    runs = sorted((DATA.parents[1] / "paper" / "multirun").glob("N400_phi0.8_s20_seed*_implicit"))
+    for run in runs:
+        (tmp_path / run.name).mkdir()
+        shutil.copy(run / "trajectory.h5", tmp_path / run.name / "trajectory.h5")
+    (point,) = collect([tmp_path])
+    flowing = [r / "trajectory.h5" for r in runs if read_run_info(r / "trajectory.h5")["status"] != "jammed"]
+    assert point["n_jammed"] == 2 and len(flowing) == 1
+    ts, params = read_timeseries(flowing[0]), read_params(flowing[0])
+    expected = ts["shear_rate"][ts["strain"] >= params["steady_state_strain"]].min()
+    assert point["slowest_rate"] == expected
+    assert 0 < point["slowest_rate"] < point["stress"] / point["viscosity"]
+
+
 def test_decorrelation_strain_of_an_ar1_process_matches_its_closed_form():
     """AR(1) x_{k+1} = rho x_k + noise has autocorrelation rho^k: it crosses 1/e at lag -1/ln(rho)."""
     from rheograph.analysis import decorrelation_strain

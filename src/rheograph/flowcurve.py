@@ -62,6 +62,12 @@ def collect(directories) -> list[dict]:
                 p["stress"],
                 p["steady_state_strain"],
             )
+            # the slowest flow of the steady window: how close a flowing run came to arresting
+            rate = ts.get("shear_rate")
+            window = ts["strain"] >= p["steady_state_strain"]
+            info["slowest_rate"] = (
+                float(rate[window].min()) if rate is not None and window.any() else float("nan")
+            )
             # LF_DEM's lagged step control is another discretisation: never pooled with the default
             scheme = scheme_name(p["integrator"], p.get("lagged_step_control", False))
             key = (p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme)
@@ -94,6 +100,8 @@ def collect(directories) -> list[dict]:
         # coordination are finite (the static packing under load), their viscosity is not reported
         source = flowing or jammed
         point["n_seeds"] = len(source)  # seeds that enter the averages (unfinished runs are listed)
+        # [σ0/η0]; over the flowing runs only (an arrested run's rate falls to zero by definition)
+        point["slowest_rate"] = min((i["slowest_rate"] for i in flowing), default=float("nan"))
         for k in KEYS:
             vals = np.array([i["summary"][k] for i in source])
             ses = np.array([i["summary"][k + "_se"] for i in source])
