@@ -82,9 +82,13 @@ def other_seeds_mean(members) -> list[np.ndarray | None]:
     return out
 
 
-def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed: int = 0) -> list[dict]:
+def score(
+    models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed: int = 0, per_snapshot=None
+) -> list[dict]:
     """Rows of metrics per (N, φ, model or lookup, ε): every ``every``-th flowing snapshot with strain >=
-    ``min_strain``, noise ``ε`` [a] drawn once per (ε, trajectory) from ``seed``."""
+    ``min_strain``, noise ``ε`` [a] drawn once per (ε, trajectory) from ``seed``.  A list given as
+    ``per_snapshot`` receives one dict per (model, ε, predicted snapshot): its targets and the prediction's
+    ratios (η_r, Π) and difference (Z_μ) — what an R² over a few snapshots of one state point hides."""
     from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.module import fold_metrics
     from rheograph.learn.predict import load_model
@@ -138,6 +142,23 @@ def score(models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed:
                     with contextlib.redirect_stderr(io.StringIO()):  # the out-of-domain N warning, expected
                         table = model.predict_snapshots(subset)
                     preds.append(np.stack([table["eta_pred"], table["pressure_pred"], table["z_mu_pred"]], 1))
+                    if per_snapshot is not None:
+                        pred, tgt = preds[-1], subset.targets
+                        per_snapshot.extend(
+                            {
+                                "n": n,
+                                "phi": phi,
+                                "model": name,
+                                "eps": eps,
+                                "run": Path(subset.source).parent.name,
+                                "strain": float(subset.strain[j]),
+                                "eta": float(tgt[j, 0]),
+                                "eta_ratio": float(pred[j, 0] / tgt[j, 0]),
+                                "pressure_ratio": float(pred[j, 1] / tgt[j, 1]),
+                                "z_mu_diff": float(pred[j, 2] - tgt[j, 2]),
+                            }
+                            for j in range(len(tgt))
+                        )
                 rows.append(
                     {
                         **common,
@@ -177,11 +198,15 @@ def main(argv=None) -> int:
     ap.add_argument("--section", default="zero_shot_n")
     ap.add_argument("--title", default=None, help="a heading inside the section (none: the page has one)")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument(
+        "--per-snapshot", action="store_true", help="also print each snapshot's prediction/target ratios"
+    )
     args = ap.parse_args(argv)
     if args.every < 1 or any(not 0.0 <= eps < 1.0 for eps in args.noise):
         ap.error("--every must be >= 1 and each --noise in [0, 1) (units of a)")
     paths = trajectory_paths(args.sources, ap)
-    rows = score(args.models, paths, args.min_strain, args.noise, args.every, args.seed)
+    snapshots = [] if args.per_snapshot else None
+    rows = score(args.models, paths, args.min_strain, args.noise, args.every, args.seed, snapshots)
     thinned = f" (every {args.every}th)" if args.every > 1 else ""
     lines = [
         f"Each shipped model on the flowing snapshots{thinned} with strain ≥ {args.min_strain:g} of the "
@@ -210,6 +235,16 @@ def main(argv=None) -> int:
     if args.title:
         lines = [f"### {args.title}", "", *lines]
     publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
+    if snapshots:
+        print(
+            "\n| N | φ | model | ε [a] | run | strain | η_r | η_r pred/true | Π pred/true | Z_μ pred − true |"
+        )
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for s in snapshots:
+            print(
+                f"| {s['n']} | {s['phi']:g} | {s['model']} | {s['eps']:g} | {s['run']} | {s['strain']:.2f} | "
+                f"{s['eta']:.4g} | {s['eta_ratio']:.3f} | {s['pressure_ratio']:.4f} | {s['z_mu_diff']:+.4f} |"
+            )
     return 0
 
 
