@@ -4,9 +4,10 @@ often a run arrests (shear-jams) at each N.
     python bench/finite_size.py data/paper/multirun data/large_n/multirun
 
 Every state point (φ, μ, σ/σ0, disp_max, scheme) simulated at ``--min-sizes`` or more N is a row per
-N: seeds pooled as in the flow curves (mean; error the larger of the spread of seeds / sqrt(n) and the
-propagated block standard errors of the strain window ≥ each run's steady_state_strain), a seed counted
-once where several sweeps hold it (the longest run).  Arrested runs are counted, never averaged into
+N, with the slowest shear rate its flowing runs recorded: seeds pooled as in the flow curves (mean;
+error the larger of the spread of seeds / sqrt(n) and the propagated block standard errors of the
+strain window ≥ each run's steady_state_strain), a seed counted once where several sweeps hold it (the
+longest run).  Arrested runs are counted, never averaged into
 η_r.  Results replace the marked section of docs/jamming.md unless ``--no-write``.
 """
 
@@ -32,6 +33,11 @@ def fmt(value: float, se: float) -> str:
     return f"{value:.{digits}f} ± {se:.{digits}f}" if np.isfinite(se) else f"{value:.{digits}f}"
 
 
+def _two_digits(value: float) -> str:
+    """Two significant digits, trailing zeros kept (0.0090, 0.060); — where undefined."""
+    return "—" if not np.isfinite(value) else f"{float(f'{value:.2g}'):#.2g}".rstrip(".")
+
+
 def table(points, min_sizes: int) -> list[str]:
     by_state = defaultdict(list)
     for p in points:
@@ -50,7 +56,7 @@ def table(points, min_sizes: int) -> list[str]:
                 f"{p['n_runs']} ({p['n_jammed']}) | "
                 f"{p['strain']:.2f} | {fmt(p['viscosity'], p['viscosity_se'])} | "
                 f"{fmt(p['pressure'], p['pressure_se'])} | {fmt(p['z_mu'], p['z_mu_se'])} | "
-                f"{p['slowest_rate']:.2g} |"
+                f"{_two_digits(p['slowest_rate'])} |"
             )
     return lines
 
@@ -108,8 +114,9 @@ def main(argv=None) -> int:
     lines = [
         f"Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at "
         f"{args.min_sizes} or more N; mean ± error over seeds and strain blocks; arrested runs counted, "
-        "not averaged into η_r (— where every run arrested); slowest γ̇: the lowest shear rate any flowing "
-        "run of the state point reached in that window (how close the flow came to arresting).",
+        "not averaged into η_r (— where every run arrested); slowest γ̇: the lowest shear rate recorded "
+        "(every output row) by any flowing run of the state point in that window — how close the flow came "
+        "to arresting; a minimum over more seeds or rows tends to be lower.",
         "",
         *table(points, args.min_sizes),
         "",

@@ -12,7 +12,8 @@ domain: that is the point), against the simulator's own targets: R² of log η_r
 model), pooled over the stresses, with the within-state fluctuation correlation of η_r.  With ``--noise``
 the positions carry Gaussian noise of each ε (declared to the model, as for an imaging model), beside the
 lookup of the other seeds' mean at the same state point.  Results replace the marked section
-(``--section``) of docs/<``--page``> (default jamming.md) unless ``--no-write``.
+(``--section``) of docs/<``--page``> (default jamming.md) unless ``--no-write``; ``--per-snapshot`` also
+prints every scored snapshot's prediction/target ratios.
 """
 
 from __future__ import annotations
@@ -87,8 +88,9 @@ def score(
 ) -> list[dict]:
     """Rows of metrics per (N, φ, model or lookup, ε): every ``every``-th flowing snapshot with strain >=
     ``min_strain``, noise ``ε`` [a] drawn once per (ε, trajectory) from ``seed``.  A list given as
-    ``per_snapshot`` receives one dict per (model, ε, predicted snapshot): its targets and the prediction's
-    ratios (η_r, Π) and difference (Z_μ) — what an R² over a few snapshots of one state point hides."""
+    ``per_snapshot`` receives one dict per (model, ε, snapshot the row scores): its run, stress, strain
+    and η_r, and the prediction's ratios (η_r, Π) and difference (Z_μ) — what an R² over a few snapshots
+    of one state point hides."""
     from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.module import fold_metrics
     from rheograph.learn.predict import load_model
@@ -106,6 +108,7 @@ def score(
         key = np.concatenate(
             [state_point_key(np.full(k.size, s.phi), np.full(k.size, s.stress)) for s, k in members]
         )
+        key_stress = np.concatenate([np.full(k.size, s.stress) for s, k in members])
         lookups = other_seeds_mean(members)
         # where a lookup exists, every row is scored on the snapshots it covers (state points with
         # another seed): R² over different snapshots would not compare
@@ -142,23 +145,29 @@ def score(
                     with contextlib.redirect_stderr(io.StringIO()):  # the out-of-domain N warning, expected
                         table = model.predict_snapshots(subset)
                     preds.append(np.stack([table["eta_pred"], table["pressure_pred"], table["z_mu_pred"]], 1))
-                    if per_snapshot is not None:
-                        pred, tgt = preds[-1], subset.targets
-                        per_snapshot.extend(
-                            {
-                                "n": n,
-                                "phi": phi,
-                                "model": name,
-                                "eps": eps,
-                                "run": Path(subset.source).parent.name,
-                                "strain": float(subset.strain[j]),
-                                "eta": float(tgt[j, 0]),
-                                "eta_ratio": float(pred[j, 0] / tgt[j, 0]),
-                                "pressure_ratio": float(pred[j, 1] / tgt[j, 1]),
-                                "z_mu_diff": float(pred[j, 2] - tgt[j, 2]),
-                            }
-                            for j in range(len(tgt))
-                        )
+                if per_snapshot is not None:
+                    # the snapshots this row scores (``have``), in its order
+                    scored = np.concatenate(preds)[have]
+                    names = [np.full(len(s), Path(s.source).parent.name) for s in subsets]
+                    runs = np.concatenate(names)[have]
+                    strain = np.concatenate([s.strain for s in subsets])[have]
+                    tgt, stress_scored = true[have], key_stress[have]
+                    per_snapshot.extend(
+                        {
+                            "n": n,
+                            "phi": phi,
+                            "model": name,
+                            "eps": eps,
+                            "run": str(runs[j]),
+                            "stress": float(stress_scored[j]),
+                            "strain": float(strain[j]),
+                            "eta": float(tgt[j, 0]),
+                            "eta_ratio": float(scored[j, 0] / tgt[j, 0]),
+                            "pressure_ratio": float(scored[j, 1] / tgt[j, 1]),
+                            "z_mu_diff": float(scored[j, 2] - tgt[j, 2]),
+                        }
+                        for j in range(len(tgt))
+                    )
                 rows.append(
                     {
                         **common,
@@ -237,12 +246,14 @@ def main(argv=None) -> int:
     publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
     if snapshots:
         print(
-            "\n| N | φ | model | ε [a] | run | strain | η_r | η_r pred/true | Π pred/true | Z_μ pred − true |"
+            "\n| N | φ | model | ε [a] | run | σ/σ0 | strain | η_r | η_r pred/true | Π pred/true "
+            "| Z_μ pred − true |"
         )
-        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for s in snapshots:
             print(
-                f"| {s['n']} | {s['phi']:g} | {s['model']} | {s['eps']:g} | {s['run']} | {s['strain']:.2f} | "
+                f"| {s['n']} | {s['phi']:g} | {s['model']} | {s['eps']:g} | {s['run']} | {s['stress']:g} | "
+                f"{s['strain']:.2f} | "
                 f"{s['eta']:.4g} | {s['eta_ratio']:.3f} | {s['pressure_ratio']:.4f} | {s['z_mu_diff']:+.4f} |"
             )
     return 0

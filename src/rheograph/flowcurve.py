@@ -62,7 +62,8 @@ def collect(directories) -> list[dict]:
                 p["stress"],
                 p["steady_state_strain"],
             )
-            # the slowest flow of the steady window: how close a flowing run came to arresting
+            # the slowest flow recorded in the steady window (one row every output interval): how close a
+            # flowing run came to arresting
             rate = ts.get("shear_rate")
             window = ts["strain"] >= p["steady_state_strain"]
             info["slowest_rate"] = (
@@ -101,7 +102,8 @@ def collect(directories) -> list[dict]:
         source = flowing or jammed
         point["n_seeds"] = len(source)  # seeds that enter the averages (unfinished runs are listed)
         # [σ0/η0]; over the flowing runs only (an arrested run's rate falls to zero by definition)
-        point["slowest_rate"] = min((i["slowest_rate"] for i in flowing), default=float("nan"))
+        rates = [i["slowest_rate"] for i in flowing if np.isfinite(i["slowest_rate"])]
+        point["slowest_rate"] = min(rates, default=float("nan"))
         for k in KEYS:
             vals = np.array([i["summary"][k] for i in source])
             ses = np.array([i["summary"][k + "_se"] for i in source])
