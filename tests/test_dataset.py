@@ -244,3 +244,19 @@ def test_the_card_keeps_area_fractions_apart_that_two_decimals_would_merge_and_m
         "0.80",
     ]
     assert series_label(0.8, 0.0) == "0.80, μ = 0"
+
+
+def test_thickening_is_named_only_from_two_flowing_stresses():
+    """One flowing stress is no flow curve: neither continuous nor discontinuous.  A shear rate that
+    falls while the stress rises is the S-shape; one that rises is continuous thickening."""
+    from rheograph.dataset_card import thickening_lines
+
+    def point(stress, eta):
+        return dict(n_particles=400, phi=0.8, mu=0.5, stress=stress, viscosity=eta, jammed=False)
+
+    (one,) = thickening_lines([point(20.0, 2000.0)])
+    (rising,) = thickening_lines([point(10.0, 100.0), point(20.0, 150.0)])  # rate 0.1 -> 0.133
+    (falling,) = thickening_lines([point(10.0, 100.0), point(20.0, 400.0)])  # rate 0.1 -> 0.05
+    assert "one flowing stress" in one and "continuous" not in one
+    assert "| continuous |" in rising
+    assert "discontinuous (S-shape)" in falling and "10 → 20" in falling

@@ -411,8 +411,16 @@ def thickening_lines(points: list[dict]) -> list[str]:
             if rate[b] < rate[a]
         ]
         stopped = [q["stress"] for q in pts if q["jammed"] and not np.isfinite(q["viscosity"])]
-        # no finished flowing point: nothing to call the flow curve yet
-        kind = "discontinuous (S-shape)" if falls else "continuous" if flowing else "–"
+        # a flow curve needs two flowing stresses to be called anything
+        kind = (
+            "discontinuous (S-shape)"
+            if falls
+            else "continuous"
+            if len(flowing) > 1
+            else "– (one flowing stress)"
+            if flowing
+            else "–"
+        )
         lines.append(
             f"| {n} | {series_label(phi, mu)} | {kind} | {', '.join(falls) or '–'} | "
             f"{', '.join(f'{s:g}' for s in stopped) or 'none'} |"
