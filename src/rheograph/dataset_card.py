@@ -412,15 +412,12 @@ def thickening_lines(points: list[dict]) -> list[str]:
         ]
         stopped = [q["stress"] for q in pts if q["jammed"] and not np.isfinite(q["viscosity"])]
         # a flow curve needs two flowing stresses to be called anything
-        kind = (
-            "discontinuous (S-shape)"
-            if falls
-            else "continuous"
-            if len(flowing) > 1
-            else "– (one flowing stress)"
-            if flowing
-            else "–"
-        )
+        if falls:
+            kind = "discontinuous (S-shape)"
+        elif len(flowing) > 1:
+            kind = "continuous"
+        else:
+            kind = "– (one flowing stress)" if flowing else "–"
         lines.append(
             f"| {n} | {series_label(phi, mu)} | {kind} | {', '.join(falls) or '–'} | "
             f"{', '.join(f'{s:g}' for s in stopped) or 'none'} |"
