@@ -41,8 +41,8 @@ class DeviceGraphSet:
         self.base_cls = type(graphs[0])
         whole = Batch.from_data_list(graphs)
         self.num_graphs = len(graphs)
-        # the fields in PyG's order (batch and ptr are rebuilt, not gathered)
-        self.keys = [k for k in whole.keys() if k not in ("batch", "ptr")]
+        # the fields in the order PyG's collation stores them (batch and ptr are rebuilt, not gathered)
+        self.keys = [k for k in whole._store.keys() if k not in ("batch", "ptr")]
         self.cat_dims = {k: whole.__cat_dim__(k, whole[k]) for k in self.keys}
         self.values = {k: whole[k].to(self.device) for k in self.keys}
         # fields concatenated alike (x and pos per node, edge_index and edge_attr per edge, the rest one
