@@ -321,7 +321,10 @@ def snapshot_graphs(
     bounds = np.linspace(0, len(jobs), workers + 1).round().astype(int)
     chunks = [jobs[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     pool = _graph_pool(workers)
-    return [g for part in pool.map(_graphs_of_snapshots, [shared] * workers, chunks) for g in part]
+    parts = pool.map(_graph_arrays_of_snapshots, [shared] * workers, chunks)
+    return [
+        Data(**{key: torch.from_numpy(value) for key, value in g.items()}) for part in parts for g in part
+    ]
 
 
 _graph_pools: dict = {}
@@ -342,6 +345,13 @@ def _graph_pool(workers: int):
 
 def _one_thread() -> None:
     torch.set_num_threads(1)
+
+
+def _graph_arrays_of_snapshots(shared: tuple, jobs: list[dict]) -> list[dict]:
+    """``_graphs_of_snapshots`` in a pool process: each graph's fields as numpy arrays (in their order),
+    sent back by value — torch would send each tensor as a shared-memory file descriptor, thousands of
+    them for a thousand graphs."""
+    return [{key: value.numpy() for key, value in g.items()} for g in _graphs_of_snapshots(shared, jobs)]
 
 
 def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
