@@ -59,8 +59,12 @@ class DeviceGraphSet:
         self.counts_cpu = [s[1:] - s[:-1] for s in slices_of_group]
         self.starts = [s[:-1].to(self.device) for s in slices_of_group]
         self.counts = [c.to(self.device) for c in self.counts_cpu]
+        # incremented fields hold node ids (edge_index): shifted by the nodes of the graphs before
         incs = {k: torch.as_tensor(whole._inc_dict[k]) for k in self.keys}
         self.inc_of = {k: incs[k].to(self.device) for k in self.keys if bool(torch.any(incs[k] != 0))}
+        for key in self.inc_of:
+            if not torch.equal(incs[key], whole.ptr[:-1]):
+                raise ValueError(f"DeviceGraphSet: field {key} is incremented by other counts than nodes")
         self.node_counts_cpu = whole.ptr[1:] - whole.ptr[:-1]
         self.node_counts = self.node_counts_cpu.to(self.device)
 
