@@ -127,6 +127,7 @@ def test_fold_processes_with_a_data_parallel_trainer_are_refused():
 
     with pytest.raises(InputError, match="fold_workers=2 with trainer.strategy=ddp_spawn"):
         check_run_settings(compose_train(["trainer=ddp", "fold_workers=2"]))
+    check_run_settings(compose_train(["trainer=ddp", "fold_workers=2", "fold=0"]))  # one fold: in-process
 
 
 def test_fold_processes_take_one_gpu_each_in_turn(monkeypatch):

@@ -362,7 +362,8 @@ def check_run_settings(cfg: DictConfig) -> None:
             f"trainer.accelerator={accelerator}: no CUDA GPU is visible to this process "
             "(torch.cuda.is_available() is false): train on the CPU with trainer=cpu (the default)"
         )
-    if "ddp" in str(cfg.trainer.get("strategy", "")) and int(cfg.get("fold_workers") or 1) > 1:
+    in_processes = int(cfg.get("fold_workers") or 1) > 1 and len(folds_to_train(cfg)) > 1
+    if "ddp" in str(cfg.trainer.get("strategy", "")) and in_processes:
         raise InputError(
             f"fold_workers={cfg.fold_workers} with trainer.strategy={cfg.trainer.strategy}: a fold process "
             "cannot start the processes of a data-parallel fold; use fold_workers=1 with trainer=ddp*, or "
