@@ -17,7 +17,9 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
     """Real weight updates: with each process's half of the training set as its one batch, the
     all-reduced gradient of two processes is the full-batch gradient of one, so five epochs of Adam give
     the same model (to float round-off: summation order) — and a model far from the untrained one, so the
-    gradient exchange is what is tested.  Test snapshots are predicted once whatever the process count."""
+    gradient exchange is what is tested.  Test snapshots are predicted once whatever the process count.
+    Every run builds its batches from the device-resident graph sets (each DDP process from its own
+    shard of graph ids); a run through PyG's per-batch loader trains the very same model."""
     base = [
         *tiny_training_overrides(tiny_files, tmp_path),
         "data.split=random",  # three runs in three grouped folds would train on one stress only
@@ -40,6 +42,7 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
         "untrained": ["trainer.max_epochs=1", "model.optimizer.lr=1e-12"],
         "single": ["trainer.max_epochs=5"],
         "ddp": ["trainer.max_epochs=5", "trainer=ddp", "trainer.devices=2"],
+        "loader": ["trainer.max_epochs=5", "data.device_resident=false"],
     }
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         for name, extra in runs.items():
@@ -52,6 +55,7 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
     moved = np.abs(pred["single"] - pred["untrained"]).max(axis=0)
     agree = np.abs(pred["ddp"] - pred["single"]).max(axis=0)
     assert np.all(agree < 1e-3 * moved), (agree, moved)
+    np.testing.assert_array_equal(pred["loader"], pred["single"])
     metrics = {n: json.loads((tmp_path / n / "metrics.json").read_text())["folds"][0] for n in runs}
     for key in ("test/r2_eta", "test/r2_pressure", "test/r2_z_mu"):
         assert metrics["ddp"][key] == pytest.approx(metrics["single"][key], abs=1e-4), key

@@ -227,7 +227,12 @@ class GraphSettings:
 
 
 def snapshot_graphs(
-    source, settings: GraphSettings, run_id: int, solve_numerics: dict | None = None, training: bool = True
+    source,
+    settings: GraphSettings,
+    run_id: int,
+    solve_numerics: dict | None = None,
+    training: bool = True,
+    workers: int = 1,
 ) -> list[Data]:
     """Graphs of the snapshots of one source (a path of any kind ``rheograph.io.snapshots`` reads, or a
     ``Snapshots``).
@@ -236,7 +241,8 @@ def snapshot_graphs(
     as a training set needs; otherwise every snapshot, targets NaN where unknown (prediction).
     ``solve_numerics``: the step settings of the one-solve input (``disp_max``, ``dt_max``,
     ``lagged_step_control``) — a model's own, from its bundle; None takes the source's (how the training
-    graphs of its simulation are built)."""
+    graphs of its simulation are built). ``workers`` > 1: the snapshots (their one solve, relaxation and
+    edges) are split between that many processes; the graphs are the same."""
     snaps = source if isinstance(source, Snapshots) else read_snapshots(source)
     path = snaps.source
     params = snaps.graph_params()
@@ -290,41 +296,98 @@ def snapshot_graphs(
     solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
     # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
-    positions, offsets = snaps.positions, snaps.le_offset
-    # the strain each snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
-    # that arrested within the step budget, which predictions flag
-    relaxed = np.full(len(snaps), np.nan)
-    relaxations = [None] * len(snaps)
-    if settings.relax_strain:
-        if "disp_max" not in solve_params:
-            raise InputError(
-                f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "
-                "needs the step disp_max: add disp_max to the file"
-            )
-        positions, offsets = positions.copy(), offsets.copy()
-        for idx in keep:
-            relaxations[idx] = relax_positions(
-                positions[idx], radii, lx, ly, offsets[idx], solve_params, settings.relax_strain
-            )
-            positions[idx], offsets[idx], relaxed[idx] = relaxations[idx][:3]
-    return [
-        snapshot_graph(
-            positions[idx],
-            radii,
-            (lx, ly, offsets[idx]),
-            solve_params,
-            settings,
-            {"phi": snaps.phi, "position_noise": float(noise[idx])},
-            contacts=contacts[k],
-            targets=snaps.targets[idx],
-            jammed=bool(snaps.jammed[idx]),
-            strain=float(snaps.strain[idx]),
-            run_id=run_id,
-            relaxed_strain=float(relaxed[idx]),
-            relaxation=relaxations[idx],
+    if settings.relax_strain and "disp_max" not in solve_params:
+        raise InputError(
+            f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "
+            "needs the step disp_max: add disp_max to the file"
         )
+    jobs = [
+        {
+            "positions": snaps.positions[idx],
+            "le_offset": float(snaps.le_offset[idx]),
+            "position_noise": float(noise[idx]),
+            "contacts": contacts[k],
+            "targets": snaps.targets[idx],
+            "jammed": bool(snaps.jammed[idx]),
+            "strain": float(snaps.strain[idx]),
+        }
         for k, idx in enumerate(keep)
     ]
+    shared = (radii, lx, ly, solve_params, settings, snaps.phi, run_id)
+    workers = min(int(workers), len(jobs))
+    if workers <= 1:
+        return _graphs_of_snapshots(shared, jobs)
+    # contiguous chunks, one per worker, returned in order: the same graphs as in this process
+    bounds = np.linspace(0, len(jobs), workers + 1).round().astype(int)
+    chunks = [jobs[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    pool = _graph_pool(workers)
+    parts = pool.map(_graph_arrays_of_snapshots, [shared] * workers, chunks)
+    return [
+        Data(**{key: torch.from_numpy(value) for key, value in g.items()}) for part in parts for g in part
+    ]
+
+
+_graph_pools: dict = {}
+
+
+def _graph_pool(workers: int):
+    """A process pool of ``workers`` (spawned, one thread each) kept for later calls: its start-up
+    (imports, compiled kernels loaded) is paid once per process, not per source."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    if workers not in _graph_pools:
+        _graph_pools[workers] = ProcessPoolExecutor(
+            max_workers=workers, mp_context=get_context("spawn"), initializer=_one_thread
+        )
+    return _graph_pools[workers]
+
+
+def _one_thread() -> None:
+    torch.set_num_threads(1)
+
+
+def _graph_arrays_of_snapshots(shared: tuple, jobs: list[dict]) -> list[dict]:
+    """``_graphs_of_snapshots`` in a pool process: each graph's fields as numpy arrays (in their order),
+    sent back by value — torch would send each tensor as a shared-memory file descriptor, thousands of
+    them for a thousand graphs."""
+    return [{key: value.numpy() for key, value in g.items()} for g in _graphs_of_snapshots(shared, jobs)]
+
+
+def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
+    """The graphs of ``jobs`` (one snapshot's positions, offset, noise, contacts, targets, ... each) of
+    one source whose ``shared`` values are (radii, lx, ly, solve parameters, settings, phi, run_id):
+    relaxed first where ``settings.relax_strain``, then its one solve, edges and inputs."""
+    radii, lx, ly, solve_params, settings, phi, run_id = shared
+    graphs = []
+    for job in jobs:
+        positions, offset = job["positions"], job["le_offset"]
+        # the strain the snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
+        # that arrested within the step budget, which predictions flag
+        relaxed, relaxation = np.nan, None
+        if settings.relax_strain:
+            relaxation = relax_positions(
+                positions.copy(), radii, lx, ly, offset, solve_params, settings.relax_strain
+            )
+            positions, offset, relaxed = relaxation[:3]
+        graphs.append(
+            snapshot_graph(
+                positions,
+                radii,
+                (lx, ly, offset),
+                solve_params,
+                settings,
+                {"phi": phi, "position_noise": job["position_noise"]},
+                contacts=job["contacts"],
+                targets=job["targets"],
+                jammed=job["jammed"],
+                strain=job["strain"],
+                run_id=run_id,
+                relaxed_strain=float(relaxed),
+                relaxation=relaxation,
+            )
+        )
+    return graphs
 
 
 def snapshot_graph(

@@ -7,6 +7,12 @@ fold — the honest estimate on trajectories the model has never seen — with t
 stress is present in the training part of every fold.  Fold k is the test set, fold (k + 1) mod K the
 validation set (early stopping, checkpointing), the rest the training set.  Target and edge-feature
 standardisation are fitted on the training part only.
+
+With ``device_resident`` (the default) each of the three graph sets is collated once and kept on the
+trainer's device, and every mini-batch is built there by indexing (``rheograph.learn.device_batch``):
+the same batches, in the same order, as PyG's loader, without per-batch collation or copies. Training
+graphs re-noised at every epoch (``graph.noise_range`` without ``noise_copies``) cannot be kept: they
+are rebuilt and collated per batch as before (their fixed-noise validation and test graphs are kept).
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from torch_geometric.loader import DataLoader
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, NoisyGraphs, SnapshotGraphDataset
 from rheograph.io.snapshots import read_snapshots
+from rheograph.learn.device_batch import DeviceGraphSet, device_loader
 from rheograph.learn.jamming import fit_jam_map
 from rheograph.naming import state_point_key
 
@@ -92,7 +99,9 @@ class SnapshotDataModule(L.LightningDataModule):
     """Fold ``fold`` of a K-fold split (module docstring) of the snapshot graphs of ``files`` (trajectory
     files, LF_DEM runs, globs or an index .json), built once with ``graph`` settings into ``cache_dir``;
     ``phi`` / ``n_particles`` select the files of one area fraction / system size (null: all),
-    ``train_fraction`` < 1 keeps that share of each training run's snapshots.  Configured by the ``data``
+    ``train_fraction`` < 1 keeps that share of each training run's snapshots, ``device_resident`` keeps the
+    graph sets collated on the trainer's device (module docstring; ``num_workers`` loader processes serve
+    only the per-batch path: false, or re-noised training graphs).  Configured by the ``data``
     group (``conf/data/``); ``setup`` makes the split and fits the standardisation on the training part."""
 
     def __init__(
@@ -110,6 +119,7 @@ class SnapshotDataModule(L.LightningDataModule):
         n_particles: int | None = None,
         train_fraction: float = 1.0,
         lfdem_params: str | None = None,
+        device_resident: bool = True,
     ):
         super().__init__()
         if split not in SPLITS:
@@ -128,6 +138,8 @@ class SnapshotDataModule(L.LightningDataModule):
         self.num_workers, self.phi, self.n_particles = num_workers, phi, n_particles
         self.train_fraction = train_fraction
         self.lfdem_params = lfdem_params
+        self.device_resident = device_resident
+        self.device_sets = {}  # {(stage, device): DeviceGraphSet}, built on first use
         self.dataset = None
         self.run_params = None  # {run_id: parameter mapping}, for graphs rebuilt from noisy positions
 
@@ -255,22 +267,32 @@ class SnapshotDataModule(L.LightningDataModule):
             }
         return NoisyGraphs(subset, self.graph, self.run_params, fresh=fresh, seed=self.split_seed)
 
-    def _loader(self, idx, shuffle):
-        return DataLoader(
-            self.graphs(idx, fresh=shuffle),
-            batch_size=self.batch_size,
-            shuffle=shuffle,
-            num_workers=self.num_workers,
-        )
+    def training_device(self) -> torch.device:
+        """The device of the attached trainer's process (its rank's under DDP); the CPU without one."""
+        trainer = getattr(self, "trainer", None)
+        return trainer.strategy.root_device if trainer is not None else torch.device("cpu")
+
+    def _loader(self, stage: str, idx, shuffle: bool):
+        graphs = self.graphs(idx, fresh=shuffle)
+        redrawn = shuffle and isinstance(graphs, NoisyGraphs)  # new noise every epoch: nothing to keep
+        if not self.device_resident or redrawn:
+            return DataLoader(
+                graphs, batch_size=self.batch_size, shuffle=shuffle, num_workers=self.num_workers
+            )
+        device = self.training_device()
+        key = (stage, str(device))
+        if key not in self.device_sets:
+            self.device_sets[key] = DeviceGraphSet(graphs, device)
+        return device_loader(self.device_sets[key], self.batch_size, shuffle)
 
     def train_dataloader(self):
-        return self._loader(self.train_idx, True)
+        return self._loader("train", self.train_idx, True)
 
     def val_dataloader(self):
-        return self._loader(self.val_idx, False)
+        return self._loader("val", self.val_idx, False)
 
     def test_dataloader(self):
-        return self._loader(self.test_idx, False)
+        return self._loader("test", self.test_idx, False)
 
 
 def check_num_folds(num_folds: int) -> None:

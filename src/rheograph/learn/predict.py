@@ -4,9 +4,10 @@ models: a shipped model (``--list-models``) or a training run directory.
 
     python predict.py --models N400_phi0.76 --input trajectory.h5 snapshot.npz par_run.dat --out p.csv
     python predict.py --list-models
+    python predict.py --models N400_phi0.76 --input trajectory.h5 --out p.csv --device cuda --workers 8
 
     import rheograph
-    model = rheograph.load_model("N400_phi0.76")
+    model = rheograph.load_model("N400_phi0.76")          # device="cuda", workers=8: on a GPU, 8 processes
     table = model.predict(positions, radii, box, le_offset, stress=10, phi=0.76, mu=0.5, ...)
 
 Model bundles (``fold*.pt``) are loaded with ``torch.load(weights_only=True)``: no code is unpickled.
@@ -249,16 +250,48 @@ def domain_report(
     return np.array([not r for r in rows], dtype=bool), rows
 
 
+DEVICES = ("cpu", "cuda", "auto")
+# nodes per forward pass of the prediction batches: many snapshots in one pass (1310 of N = 400), few
+# enough that the network's activations stay within a few hundred MB on any device
+PREDICT_NODE_BUDGET = 2**19
+
+
+def resolve_device(device: str | torch.device, where: str = "device") -> torch.device:
+    """``cpu``, ``cuda`` (``cuda:K``) or ``auto`` (a CUDA GPU when one is visible, else the CPU) as a
+    torch device; a CUDA device without one is refused in one line naming ``where``."""
+    name = str(device)
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name != "cpu" and not name.startswith("cuda"):
+        raise InputError(f"{where}={name!r} is invalid: allowed {list(DEVICES)} (or cuda:K)")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise InputError(
+            f"{where}={name}: no CUDA GPU is visible to this process (torch.cuda.is_available() is false): "
+            "use cpu, or auto to take a GPU only where there is one"
+        )
+    try:
+        return torch.device(name)
+    except RuntimeError as exc:
+        raise InputError(f"{where}={name!r} is not a torch device name") from exc
+
+
 class Surrogate:
     """An ensemble of fold models with what they were trained on (``domain``) and, for a shipped model,
-    its card; ``load_model`` makes one."""
+    its card; ``load_model`` makes one. ``device``: where the networks run (``resolve_device``);
+    ``workers``: processes that build the snapshots' graphs and physics inputs (1: this one)."""
 
-    def __init__(self, bundle_paths: list[Path], label: str):
+    def __init__(self, bundle_paths: list[Path], label: str, device="cpu", workers: int = 1):
         if not bundle_paths:
             raise InputError("no model bundles (fold*.pt) given: name a shipped model or a training run")
+        if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+            raise InputError(f"workers={workers!r} is invalid: allowed an integer >= 1")
         self.label = label
+        self.device = resolve_device(device)
+        self.workers = workers
         self.paths = sorted(bundle_paths)
         self.models = [load_bundle(p) for p in self.paths]
+        for module, _, _ in self.models:
+            module.to(self.device)
         self.min_strain = min(settings.min_strain for _, settings, _ in self.models)
         self.settings = dataclasses.replace(self.models[0][1], min_strain=0.0)
         if any(dataclasses.replace(s, min_strain=0.0) != self.settings for _, s, _ in self.models):
@@ -327,6 +360,7 @@ class Surrogate:
             run_id=0,
             solve_numerics=self.solve_numerics(snaps.phi, snaps.n_particles),
             training=False,
+            workers=self.workers,
         )
         positions_only = not self.settings.stress_known
         if positions_only:
@@ -335,8 +369,9 @@ class Surrogate:
             for g in graphs:
                 g.stress = torch.ones_like(g.stress)
         preds = []
+        per_pass = max(1, PREDICT_NODE_BUDGET // snaps.n_particles)
         for module, _, _ in self.models:
-            pred, true, meta = predict_dataset(module, graphs, batch_size=64)
+            pred, true, meta = predict_dataset(module, graphs, batch_size=per_pass, device=self.device)
             preds.append(pred)
         preds = np.stack(preds)  # (models, S, 3)
         extra = {}
@@ -437,10 +472,12 @@ class Surrogate:
         return self.predict_snapshots(snaps, accept_mismatch)
 
 
-def load_model(name_or_path: str | Path) -> Surrogate:
-    """A shipped model by name (``rheograph.list_models()``), a training run directory or a bundle."""
+def load_model(name_or_path: str | Path, device="cpu", workers: int = 1) -> Surrogate:
+    """A shipped model by name (``rheograph.list_models()``), a training run directory or a bundle;
+    ``device`` (``cpu``, ``cuda``, ``auto``) runs its networks there, ``workers`` processes build the
+    snapshots' graphs and physics inputs (the predictions are the same)."""
     paths, label = model_paths(name_or_path)
-    return Surrogate(paths, label)
+    return Surrogate(paths, label, device=device, workers=workers)
 
 
 # ---- command line ---------------------------------------------------------------------------------
@@ -530,6 +567,17 @@ def main(argv=None) -> None:
         action="store_true",
         help="predict for inputs of another suspension than the model's (flagged out of domain)",
     )
+    ap.add_argument(
+        "--device",
+        default="cpu",
+        help="where the networks run: cpu (default), cuda (cuda:K) or auto (a GPU when there is one)",
+    )
+    ap.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="processes building the snapshots' graphs and physics inputs (one solve each; default 1)",
+    )
     args = ap.parse_args(argv)
     if args.list_models:
         for name in list_models():
@@ -550,7 +598,10 @@ def main(argv=None) -> None:
     out = Path(args.out)
     if out.suffix not in (".csv", ".h5") or not out.parent.is_dir():
         raise InputError(f"--out {out}: must be a .csv or .h5 file in an existing directory")
-    model = load_model(args.models)
+    device = resolve_device(args.device, "--device")
+    if args.workers < 1:
+        raise InputError(f"--workers {args.workers}: allowed an integer >= 1")
+    model = load_model(args.models, device=device, workers=args.workers)
     given = dict(_parse_param(p) for p in args.param)
     tables = []
     for path in args.input:

@@ -255,14 +255,39 @@ class _RelayToLoggers(logging.Handler):
         logging.getLogger(record.name).handle(record)
 
 
+GPU_ACCELERATORS = ("gpu", "cuda")
+
+# the GPU a fold process trains on (set once per process by _pin_fold_process; None on the CPU)
+_fold_device: int | None = None
+
+
+def _pin_fold_process(device_queue) -> None:
+    """Initialiser of a fold process on a GPU machine: takes one device index for all its folds."""
+    global _fold_device
+    _fold_device = device_queue.get()
+    torch.cuda.set_device(_fold_device)
+
+
+def fold_process_devices(cfg: DictConfig, workers: int) -> list[int] | None:
+    """The GPU index of each of ``workers`` fold processes (in turn over the visible GPUs, so that with
+    as many processes as GPUs each has its own), or None when training on the CPU."""
+    if str(cfg.trainer.get("accelerator", "cpu")) not in GPU_ACCELERATORS:
+        return None
+    count = torch.cuda.device_count()
+    return [k % count for k in range(workers)]
+
+
 def _fold_process(cfg_yaml: str, run_dir: str, k: int, log_queue) -> None:
     """Entry of one fold process (``fold_workers`` > 1): one torch thread, results to ``run_dir``, log
-    records (the per-epoch lines) to the parent through ``log_queue``.  The OpenMP wait policy is inherited
-    from the parent's environment (set by the entry points before torch loads: OpenMP reads it once)."""
+    records (the per-epoch lines) to the parent through ``log_queue``; on a GPU machine the trainer uses
+    the process's own device.  The OpenMP wait policy is inherited from the parent's environment (set by
+    the entry points before torch loads: OpenMP reads it once)."""
     root = logging.getLogger()
     root.handlers = [logging.handlers.QueueHandler(log_queue)]
     root.setLevel(logging.INFO)
     cfg = OmegaConf.create(cfg_yaml)
+    if _fold_device is not None:
+        cfg.trainer.devices = [_fold_device]
     torch.set_num_threads(1)
     logging.getLogger("lightning.pytorch.utilities.rank_zero").setLevel(logging.WARNING)
     train_fold(cfg, Path(run_dir), k, graph_settings(cfg))
@@ -282,12 +307,20 @@ def train_folds_in_processes(cfg: DictConfig, run_dir: Path, folds: list[int]) -
     workers = min(int(cfg.fold_workers), len(folds))
     log.info("training folds %s in %d processes", folds, workers)
     context = mp.get_context("spawn")
+    devices = fold_process_devices(cfg, workers)
     with context.Manager() as manager:
         log_queue = manager.Queue()
+        pinning = {}
+        if devices is not None:
+            log.info("fold processes on GPUs %s", devices)
+            device_queue = manager.Queue()
+            for device in devices:
+                device_queue.put(device)
+            pinning = {"initializer": _pin_fold_process, "initargs": (device_queue,)}
         listener = logging.handlers.QueueListener(log_queue, _RelayToLoggers())
         listener.start()
         try:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=context, **pinning) as pool:
                 futures = [pool.submit(_fold_process, cfg_yaml, str(run_dir), k, log_queue) for k in folds]
                 for future in futures:
                     future.result()  # re-raises a fold's error here
@@ -323,6 +356,19 @@ def check_run_settings(cfg: DictConfig) -> None:
         value = cfg.get(key)
         if value is not None and (not isinstance(value, int) or value < low):
             raise InputError(f"{key}={value} is invalid: allowed an integer >= {low}")
+    accelerator = str(cfg.trainer.get("accelerator", "cpu"))
+    if accelerator in GPU_ACCELERATORS and not torch.cuda.is_available():
+        raise InputError(
+            f"trainer.accelerator={accelerator}: no CUDA GPU is visible to this process "
+            "(torch.cuda.is_available() is false): train on the CPU with trainer=cpu (the default)"
+        )
+    in_processes = int(cfg.get("fold_workers") or 1) > 1 and len(folds_to_train(cfg)) > 1
+    if "ddp" in str(cfg.trainer.get("strategy", "")) and in_processes:
+        raise InputError(
+            f"fold_workers={cfg.fold_workers} with trainer.strategy={cfg.trainer.strategy}: a fold process "
+            "cannot start the processes of a data-parallel fold; use fold_workers=1 with trainer=ddp*, or "
+            "fold processes (one per device) without it"
+        )
 
 
 def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
@@ -401,6 +447,8 @@ def config_fingerprint(cfg: DictConfig) -> str:
 
     skip = ("fold", "report", "threads", "fold_workers")  # how and which folds run, not what they learn
     keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in skip}
+    # how batches are assembled, not which: the device-resident batches equal the per-batch loader's
+    keep.get("data", {}).pop("device_resident", None)
     # options added later, at the value that reproduces what came before them: left out, so that runs
     # trained before the option existed stay valid (resumable, reportable)
     for group, key, neutral in NEUTRAL_LATER_OPTIONS:
@@ -478,14 +526,19 @@ def load_finished_fold(run_dir: Path, k: int):
 
 
 @torch.no_grad()
-def predict_dataset(module, dataset, batch_size: int = 64):
-    """Physical predictions and truths (G, 3) and per-graph metadata for a dataset of graphs."""
+def predict_dataset(module, dataset, batch_size: int = 64, device=None):
+    """Physical predictions and truths (G, 3) and per-graph metadata for a dataset of graphs, in forward
+    passes of ``batch_size`` graphs on ``device`` (None: where the module is)."""
     from torch_geometric.loader import DataLoader
 
     module.eval()
+    if device is not None:
+        module.to(device)
+    device = next(module.parameters()).device
     preds, trues, stress, phi, run, jammed, size = [], [], [], [], [], [], []
     for batch in DataLoader(dataset, batch_size=batch_size):
-        preds.append(module(batch).numpy())
+        preds.append(module(batch.to(device)).cpu().numpy())
+        batch = batch.cpu()
         trues.append(batch.y_raw.numpy())
         stress.append(batch.stress.numpy())
         phi.append(batch.phi.numpy())
