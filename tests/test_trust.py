@@ -132,6 +132,20 @@ def test_only_surrogate_module_subclasses_can_be_registered():
             register_network(bad)
 
 
+def test_a_bare_snapshot_file_holding_pickled_objects_is_refused_unread(tmp_path):
+    import numpy as np
+
+    from rheograph.io.snapshots import read_snapshots
+
+    marker = tmp_path / "payload_ran"
+    positions = np.empty(1, dtype=object)
+    positions[0] = Payload(marker)
+    np.savez(tmp_path / "s.npz", positions=positions, radii=np.ones(4), box=np.ones(2))
+    with pytest.raises(InputError, match="s.npz: not a readable .npz file") as refused:
+        read_snapshots(tmp_path / "s.npz")
+    assert "\n" not in str(refused.value) and not marker.exists()
+
+
 @pytest.mark.parametrize("planted", ["processed/graphs.pt", "processed/pre_transform.pt", "parts/0.pt"])
 def test_a_pickle_payload_in_the_graph_cache_never_runs_and_the_cache_is_rebuilt(
     tiny_files, tmp_path, planted, caplog
