@@ -223,6 +223,29 @@ def test_a_pickle_payload_in_a_resume_checkpoint_never_runs_and_the_fold_starts_
     assert "the fold starts again" in warnings[0]
 
 
+@pytest.mark.parametrize("flag", ["--experimental-rerun", "--experimental-rerun=", "--exp"])
+def test_hydras_rerun_flag_which_unpickles_its_file_is_refused_in_one_line(tmp_path, monkeypatch, flag):
+    """``--experimental-rerun FILE`` (or an abbreviation argparse accepts) would unpickle FILE: every
+    Hydra entry point refuses it before Hydra reads the file."""
+    import pickle
+
+    from rheograph.console import _hydra_app
+    from rheograph.errors import run_hydra_app
+
+    marker, planted = tmp_path / "payload_ran", tmp_path / "config.pickle"
+    planted.write_bytes(pickle.dumps(Payload(marker)))
+    argv = [f"{flag}{planted}"] if flag.endswith("=") else [flag, str(planted)]
+    monkeypatch.setattr(sys, "argv", ["rheograph train", *argv])
+    with pytest.raises(SystemExit) as refused:
+        run_hydra_app(_hydra_app("train"), "rheograph train")
+    message = str(refused.value.code)
+    assert (
+        message.startswith(f"rheograph train: error: {flag.rstrip('=')}: not accepted")
+        and "\n" not in message
+    )
+    assert not marker.exists()
+
+
 # ---- static check: no reader unpickles ---------------------------------------------------------------
 UNPICKLING_MODULES = {"pickle", "cPickle", "_pickle", "dill", "cloudpickle", "shelve", "marshal", "joblib"}
 
