@@ -132,7 +132,7 @@ def fit_fold(cfg, k=0, curve=False):
     trainer.fit(module, datamodule=dm)
     seconds = time.perf_counter() - t0 - (tracker.spent if tracker else 0.0)
     ckpt = next(c for c in callbacks if hasattr(c, "best_model_path"))
-    state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
+    state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=True)["state_dict"]
     module.load_state_dict(state)
     shutil.rmtree(tmp, ignore_errors=True)
     return held_out_scores(module, dm), seconds, (tracker.rows if tracker else []), module, dm

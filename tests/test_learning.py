@@ -1215,21 +1215,45 @@ class OffsetNetwork(SurrogateModule):
         return super()._net(batch) + self.offset
 
 
-def test_a_subclassed_network_trains_and_predict_serves_it_as_itself(tiny_files, tmp_path):
+def test_a_subclassed_network_trains_and_predict_serves_it_as_itself(tiny_files, tmp_path, monkeypatch):
     """``model._target_`` naming a SurrogateModule subclass: trained like the default, and its fold
-    bundles are rebuilt as that class (its own parameters loaded) by load_model / predict.py."""
+    bundles are rebuilt as that class (its own parameters loaded) by load_model / predict.py once the class
+    is registered — passed to load_model, registered in the process, or declared as an entry point of an
+    installed package — and refused in one line before."""
+    from rheograph.learn import networks
     from rheograph.learn.predict import load_model
     from rheograph.learn.train import train_folds
 
     base = [*quick_folds(tiny_files, tmp_path), "report=false", "threads=1", "fold=0"]
     train_folds(compose_train([*base, f"model._target_={__name__}.OffsetNetwork"]), tmp_path / "run")
-    model = load_model(tmp_path / "run")
+    name = f"{OffsetNetwork.__module__}:{OffsetNetwork.__qualname__}"
+    with pytest.raises(InputError, match=f"its network class '{name}' is not registered"):
+        load_model(tmp_path / "run")  # imported in this process, but not registered
+    model = load_model(tmp_path / "run", network_class=OffsetNetwork)
     (module, _, _), *_ = model.models
-    assert type(module).__name__ == "OffsetNetwork"
+    assert type(module) is OffsetNetwork
     trained = torch.load(tmp_path / "run" / "fold0.pt", weights_only=True)["state_dict"]["offset"]
     assert torch.equal(module.offset.detach(), trained) and trained.abs().sum() > 0
     table = model.predict_snapshots(read_snapshots(tiny_files[0]))
     assert np.isfinite(table["eta_pred"]).all()
+    with pytest.raises(InputError, match=f"network_class={__name__}:NarrowNetwork is another class"):
+        load_model(tmp_path / "run", network_class=NarrowNetwork)
+
+    monkeypatch.setattr(networks, "_registered", {})
+    import rheograph
+
+    assert rheograph.register_network(OffsetNetwork) is OffsetNetwork
+    assert type(load_model(tmp_path / "run").models[0][0]) is OffsetNetwork
+
+    # an installed package declaring it in the rheograph.networks entry-point group (its metadata on the
+    # import path, as pip writes it)
+    monkeypatch.setattr(networks, "_registered", {})
+    dist = tmp_path / "site" / "offset_networks-1.0.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: offset-networks\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text(f"[rheograph.networks]\noffset = {name}\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    assert type(load_model(tmp_path / "run").models[0][0]) is OffsetNetwork
 
 
 class NarrowNetwork(SurrogateModule):

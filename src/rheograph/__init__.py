@@ -6,10 +6,11 @@ model = rheograph.load_model("N400_phi0.76")
 table = model.predict(positions, radii, box, le_offset, stress=10, phi=0.76, mu=0.5, kn_coefficient=2e4,
                       kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5)
 snaps = rheograph.read_snapshots("par_run.dat")   # rheograph, bare or LF_DEM sources
+rheograph.register_network(MyModule)          # bundles naming this SurrogateModule subclass load as it
 """
 
 __version__ = "0.1.0"
-__all__ = ["list_models", "load_model", "read_snapshots"]
+__all__ = ["list_models", "load_model", "read_snapshots", "register_network"]
 
 
 def __getattr__(name):
@@ -22,6 +23,10 @@ def __getattr__(name):
         from rheograph.learn.registry import list_models
 
         return list_models
+    if name == "register_network":
+        from rheograph.learn.networks import register_network
+
+        return register_network
     if name == "read_snapshots":
         from rheograph.io.snapshots import read_snapshots
 

@@ -119,6 +119,20 @@ def _raised_in_hydra(exc: BaseException) -> bool:
     return tb is not None and package in Path(tb.tb_frame.f_code.co_filename).resolve().parents
 
 
+def refuse_unpickling_flags(program: str, argv: list[str]) -> None:
+    """Hydra's ``--experimental-rerun FILE`` (also abbreviated, as argparse allows: ``--exp``) unpickles
+    FILE, and so runs whatever code the file holds; no entry point of this package reads a pickle, so it
+    is refused in one line before Hydra sees it."""
+    for arg in argv:
+        flag = arg.split("=", 1)[0]
+        if len(flag) >= 3 and "--experimental-rerun".startswith(flag):
+            sys.exit(
+                f"{program}: error: {flag}: not accepted (Hydra's rerun unpickles the file it is given, "
+                "which could run any code); rerun with the same overrides instead (a run directory lists "
+                "them in .hydra/overrides.yaml)"
+            )
+
+
 def run_hydra_app(app, program: str):
     """Runs a ``@hydra.main`` function: what Hydra refuses while composing the configuration from the
     command line (a misspelled key, an unknown config option, a malformed override) ends the program with
@@ -127,6 +141,7 @@ def run_hydra_app(app, program: str):
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    refuse_unpickling_flags(program, sys.argv[1:])
     saved = {key: os.environ.get(key) for key in ("RHEOGRAPH_DEBUG", "HYDRA_FULL_ERROR")}
     os.environ["RHEOGRAPH_DEBUG"] = "1" if wants_traceback() else "0"
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it

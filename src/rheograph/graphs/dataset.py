@@ -548,6 +548,34 @@ def _files_fingerprint(files) -> list:
     return [(str(Path(f).resolve()), os.path.getsize(f), int(os.path.getmtime(f))) for f in files]
 
 
+GRAPH_CACHE_FORMAT = "rheograph-graphs-1"
+
+
+def _save_atomically(contents: dict, path) -> None:
+    """``contents`` (tensors and plain values) to ``path`` through a temporary file: a killed write leaves
+    no part-written file under the final name."""
+    tmp = Path(path).with_suffix(".tmp")
+    torch.save(contents, tmp)
+    tmp.replace(path)
+
+
+def _read_part(path: Path) -> list:
+    """The graphs of one trajectory file saved by an unfinished build (a list of ``Data``)."""
+    stored = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(stored, dict) or stored.get("format") != GRAPH_CACHE_FORMAT:
+        raise ValueError(f"not a graph cache part of format {GRAPH_CACHE_FORMAT}")
+    return [Data.from_dict(graph) for graph in stored["graphs"]]
+
+
+def _load_failure(exc: Exception) -> str:
+    """The first line of why a cache file could not be read (torch's weights-only refusal runs to many
+    lines of advice on loading the file unsafely, which does not apply here)."""
+    text = str(exc).strip()
+    if text.startswith("Weights only load failed"):
+        return "it holds objects other than tensors and plain values"
+    return (text.splitlines() or [type(exc).__name__])[0][:160]
+
+
 class SnapshotGraphDataset(InMemoryDataset):
     """All snapshot graphs of a list of trajectory files.
 
@@ -585,8 +613,9 @@ class SnapshotGraphDataset(InMemoryDataset):
                 # 3: jammed per snapshot (after the flow stopped), kept at any strain; 4: from the first row
                 # of the jam detector's window on (one row earlier than 3); 5: positions and box in each
                 # graph, any snapshot source; 6: positions in float64, shell and noise inputs; 7: the
-                # strain each snapshot was relaxed by
-                "version": 7,
+                # strain each snapshot was relaxed by; 8: tensors and plain values only (read without
+                # unpickling objects), no PyG class stored
+                "version": 8,
             },
             sort_keys=True,
             default=list,
@@ -595,11 +624,34 @@ class SnapshotGraphDataset(InMemoryDataset):
         super().__init__(root=str(Path(cache_dir) / self.digest))
         try:
             self.load(self.processed_paths[0])
-        except Exception as exc:  # a truncated or corrupt cache entry (e.g. a killed build): rebuild it
-            log.warning("graph cache %s unreadable (%s): rebuilding", self.processed_paths[0], exc)
+        except Exception as exc:  # truncated, corrupt (a killed build) or holding objects: rebuild it
+            log.warning(
+                "graph cache %s unreadable (%s): rebuilding", self.processed_paths[0], _load_failure(exc)
+            )
             Path(self.processed_paths[0]).unlink(missing_ok=True)
             self.process()
             self.load(self.processed_paths[0])
+
+    # The cache is read with torch.load(weights_only=True), never by PyG's readers: PyG's
+    # InMemoryDataset.load falls back to unpickling objects when a weights-only load fails, and its
+    # Dataset._process unpickles pre_transform.pt and pre_filter.pt.  A cache directory may be copied from
+    # elsewhere: nothing in it may run code.
+    def _process(self):
+        if not Path(self.processed_paths[0]).exists():
+            Path(self.processed_dir).mkdir(parents=True, exist_ok=True)
+            self.process()
+
+    def save(self, graphs, path) -> None:  # type: ignore[override]
+        """All ``graphs`` collated into tensors, as a dict of tensors and plain values."""
+        data, slices = self.collate(graphs)
+        _save_atomically({"format": GRAPH_CACHE_FORMAT, "data": data.to_dict(), "slices": slices}, path)
+
+    def load(self, path) -> None:  # type: ignore[override]
+        stored = torch.load(path, map_location="cpu", weights_only=True)
+        if not isinstance(stored, dict) or stored.get("format") != GRAPH_CACHE_FORMAT:
+            raise ValueError(f"not a graph cache of format {GRAPH_CACHE_FORMAT}")
+        self.data = Data.from_dict(stored["data"])
+        self.slices = stored["slices"]
 
     @property
     def raw_file_names(self):
@@ -621,14 +673,15 @@ class SnapshotGraphDataset(InMemoryDataset):
         for run_id, path in enumerate(self.files):
             part = parts / f"{run_id}.pt"
             try:
-                built = torch.load(part, weights_only=False) if part.exists() else None
-            except Exception as exc:  # a part killed mid-write: build it again
-                log.warning("graph cache part %s unreadable (%s): rebuilding it", part, exc)
+                built = _read_part(part) if part.exists() else None
+            except Exception as exc:  # a part killed mid-write, or one holding objects: build it again
+                log.warning("graph cache part %s unreadable (%s): rebuilding it", part, _load_failure(exc))
                 built = None
             if built is None:
                 built = self._file_graphs(run_id, path)
-                torch.save(built, part.with_suffix(".tmp"))
-                part.with_suffix(".tmp").replace(part)
+                _save_atomically(
+                    {"format": GRAPH_CACHE_FORMAT, "graphs": [graph.to_dict() for graph in built]}, part
+                )
             else:
                 log.info("graphs of %s (%d/%d) from an earlier build", path, run_id + 1, len(self.files))
             graphs.extend(built)

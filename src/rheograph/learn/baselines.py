@@ -145,12 +145,12 @@ def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
     from rheograph.graphs.dataset import SnapshotGraphDataset
     from rheograph.learn.datamodule import split_files
     from rheograph.learn.module import fold_metrics
-    from rheograph.learn.predict import load_bundle
+    from rheograph.learn.predict import bundle_graph_settings, read_bundle
     from rheograph.naming import state_point_key
 
     run_dir = Path(run_dir)
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())
-    _, settings, _ = load_bundle(run_dir / f"fold{k}.pt")
+    settings = bundle_graph_settings(read_bundle(run_dir / f"fold{k}.pt"))  # no network needed
     dataset = SnapshotGraphDataset(split_files(split), settings, cache_dir)
     fitted = np.r_[split["train"], split["val"]]  # as the baselines: no early stopping to hold out for
     test = np.asarray(split["test"])

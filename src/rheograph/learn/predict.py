@@ -10,7 +10,10 @@ models: a shipped model (``--list-models``) or a training run directory.
     model = rheograph.load_model("N400_phi0.76")          # device="cuda", workers=8: on a GPU, 8 processes
     table = model.predict(positions, radii, box, le_offset, stress=10, phi=0.76, mu=0.5, ...)
 
-Model bundles (``fold*.pt``) are loaded with ``torch.load(weights_only=True)``: no code is unpickled.
+Model folders are untrusted input (docs/faults.md, "What is trusted"): bundles (``fold*.pt``) are read
+with ``torch.load(weights_only=True)``, so no code is unpickled, and the network class a bundle names is
+only looked up among the classes the user registers (``network_class=``, ``rheograph.register_network``
+or the ``rheograph.networks`` entry-point group: rheograph.learn.networks), never imported by that name.
 
 A model is trained on one suspension: every physical parameter it depends on (``PHYSICAL_PARAMS``) must
 come with the snapshot and equal the model's; an absent or different one is refused in one line, never
@@ -38,7 +41,6 @@ import argparse
 import collections
 import csv
 import dataclasses
-import importlib
 import math
 import sys
 from pathlib import Path
@@ -52,6 +54,7 @@ from rheograph.io.snapshots import PHYSICAL_PARAMS, Snapshots, read_snapshots, s
 from rheograph.learn.error_model import predicted_error, read_error_model
 from rheograph.learn.jamming import jammed_fraction
 from rheograph.learn.module import TARGET_NAMES, SurrogateModule, network_hparams
+from rheograph.learn.networks import registered_network
 from rheograph.learn.registry import list_models, model_paths, read_card
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 
@@ -65,38 +68,9 @@ EXACT_POSITION_PRECISION = 3e-5
 TRACKING_PRECISION = 0.01
 
 
-def _module_class(path, name: str | None) -> type:
-    """The LightningModule class a bundle was trained with: ``SurrogateModule`` or a subclass of it
-    (``module:qualname``); bundles without the record are ``SurrogateModule``'s.  A class not imported
-    yet is imported by its module's name: an installed module (the bundle itself carries no code), whose
-    import runs that module, as loading the model in Python would."""
-    if not name:
-        return SurrogateModule
-    module_name, _, qualname = name.partition(":")
-    subclasses, seen = list(SurrogateModule.__subclasses__()), []
-    while subclasses:  # already imported: no import needed
-        cls = subclasses.pop()
-        seen.append(cls)
-        subclasses += cls.__subclasses__()
-    for cls in seen:
-        if cls.__module__ == module_name and cls.__qualname__ == qualname:
-            return cls
-    try:
-        found = importlib.import_module(module_name)
-        for part in qualname.split("."):
-            found = getattr(found, part)
-    except (ImportError, AttributeError) as exc:
-        raise InputError(
-            f"{path}: its network class {name} cannot be imported here ({exc}); install or put on the "
-            "Python path the package that defines it"
-        ) from exc
-    if not (isinstance(found, type) and issubclass(found, SurrogateModule)):
-        raise InputError(f"{path}: its network class {name} is not a SurrogateModule")
-    return found
-
-
-def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]:
-    """(module, graph settings, training domain) of a bundle written by ``train.save_bundle``."""
+def read_bundle(path: str | Path) -> dict:
+    """The contents of a bundle written by ``train.save_bundle``: tensors and plain values, read with
+    ``torch.load(weights_only=True)``; anything else is refused in one line."""
     try:
         bundle = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # a truncated or foreign file: torch raises several types, in many lines
@@ -114,15 +88,30 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
             f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
             "retrained"
         )
-    module_class = _module_class(path, bundle.get("module_class"))
-    module = module_class(**network_hparams(bundle["hparams"], module_class))
-    module.load_state_dict(bundle["state_dict"])
-    module.eval()
+    return bundle
+
+
+def bundle_graph_settings(bundle: dict) -> GraphSettings:
+    """The graph settings a bundle (``read_bundle``) was trained with."""
     graph = dict(bundle["graph"])
     graph["edge_features"] = tuple(graph["edge_features"])
     graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
     graph["noise_range"] = tuple(graph.get("noise_range", ()))
-    return module, GraphSettings(**graph), bundle["domain"]
+    return GraphSettings(**graph)
+
+
+def load_bundle(
+    path: str | Path, network_class: type | None = None
+) -> tuple[SurrogateModule, GraphSettings, dict]:
+    """(module, graph settings, training domain) of a bundle written by ``train.save_bundle``.  The
+    module is ``SurrogateModule`` or the registered subclass the bundle names (rheograph.learn.networks;
+    ``network_class``: one registered for this call)."""
+    bundle = read_bundle(path)
+    module_class = registered_network(bundle.get("module_class"), path, network_class)
+    module = module_class(**network_hparams(bundle["hparams"], module_class))
+    module.load_state_dict(bundle["state_dict"])
+    module.eval()
+    return module, bundle_graph_settings(bundle), bundle["domain"]
 
 
 def trained_noise(domain: dict) -> tuple[float, float]:
@@ -280,7 +269,14 @@ class Surrogate:
     its card; ``load_model`` makes one. ``device``: where the networks run (``resolve_device``);
     ``workers``: processes that build the snapshots' graphs and physics inputs (1: this one)."""
 
-    def __init__(self, bundle_paths: list[Path], label: str, device="cpu", workers: int = 1):
+    def __init__(
+        self,
+        bundle_paths: list[Path],
+        label: str,
+        network_class: type | None = None,
+        device="cpu",
+        workers: int = 1,
+    ):
         if not bundle_paths:
             raise InputError("no model bundles (fold*.pt) given: name a shipped model or a training run")
         if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
@@ -289,7 +285,7 @@ class Surrogate:
         self.device = resolve_device(device)
         self.workers = workers
         self.paths = sorted(bundle_paths)
-        self.models = [load_bundle(p) for p in self.paths]
+        self.models = [load_bundle(p, network_class) for p in self.paths]
         for module, _, _ in self.models:
             module.to(self.device)
         self.min_strain = min(settings.min_strain for _, settings, _ in self.models)
@@ -472,12 +468,16 @@ class Surrogate:
         return self.predict_snapshots(snaps, accept_mismatch)
 
 
-def load_model(name_or_path: str | Path, device="cpu", workers: int = 1) -> Surrogate:
-    """A shipped model by name (``rheograph.list_models()``), a training run directory or a bundle;
-    ``device`` (``cpu``, ``cuda``, ``auto``) runs its networks there, ``workers`` processes build the
-    snapshots' graphs and physics inputs (the predictions are the same)."""
+def load_model(
+    name_or_path: str | Path, network_class: type | None = None, device="cpu", workers: int = 1
+) -> Surrogate:
+    """A shipped model by name (``rheograph.list_models()``), a training run directory or a bundle.
+    ``network_class``: the ``SurrogateModule`` subclass its bundles name, when it is not registered
+    otherwise (rheograph.learn.networks); nothing named in the bundles is imported.  ``device`` (``cpu``,
+    ``cuda``, ``auto``) runs its networks there, ``workers`` processes build the snapshots' graphs and
+    physics inputs (the predictions are the same)."""
     paths, label = model_paths(name_or_path)
-    return Surrogate(paths, label, device=device, workers=workers)
+    return Surrogate(paths, label, network_class, device=device, workers=workers)
 
 
 # ---- command line ---------------------------------------------------------------------------------

@@ -139,7 +139,7 @@ def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_di
         "physical_params": domain["physical_params"],
         "solve_numerics": domain["solve_numerics"],
         "position_noise": domain.get("position_noise", 0.0),
-        # another network than SurrogateModule's own: its class must be importable where the model is used
+        # another network than SurrogateModule's own: its class must be registered where the model is used
         "module_class": bundle.get("module_class"),
         "on_state_mean": bool(bundle["hparams"].get("on_state_mean", False)),
         "held_out_r2": _score_rows(metrics),
@@ -234,7 +234,9 @@ def card_markdown(card: dict) -> str:
     lines += [
         "* Learned: the message-passing network and its head (η_r, Π, Z_μ)"
         + (
-            f" — class `{card['module_class']}`, which must be importable where the model is used."
+            f" — class `{card['module_class']}`, which the model folder does not carry: it loads where "
+            "that class is registered (`rheograph.load_model(..., network_class=...)`, "
+            "`rheograph.register_network` or the `rheograph.networks` entry-point group)."
             if card.get("module_class")
             else "."
         ),

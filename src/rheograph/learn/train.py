@@ -160,12 +160,18 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
     return dm, module
 
 
-def _readable_checkpoint(path: Path) -> bool:
+def _unreadable_checkpoint(path: Path) -> str:
+    """Why the checkpoint at ``path`` cannot be read as tensors and plain values ('' if it can).  Read
+    with ``torch.load(weights_only=True)``: a run directory may come from elsewhere, and an object in it
+    must never be unpickled (what Lightning writes needs nothing more)."""
     try:
-        torch.load(path, map_location="cpu", weights_only=False)
-    except Exception:  # truncated or garbage: whatever the unpickler raises
-        return False
-    return True
+        torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated, garbage or pickled objects: whatever the unpickler raises
+        text = str(exc).strip()
+        if text.startswith("Weights only load failed"):
+            return "it holds objects other than tensors and plain values"
+        return (text.splitlines() or [type(exc).__name__])[0][:160]
+    return ""
 
 
 def train_fold(
@@ -196,17 +202,31 @@ def train_fold(
     trainer = instantiate(
         cfg.trainer, callbacks=[*callbacks, resume], logger=logger, default_root_dir=str(resume_dir)
     )
-    if resume_point.exists() and not _readable_checkpoint(resume_point):
-        log.warning(
-            "fold %d: %s is unreadable (killed while writing it?): the fold starts again", k, resume_point
-        )
-        resume_point.unlink()
+    if resume_point.exists():
+        # the resume point and the best-so-far weights it refers to: both are read back
+        for path in [resume_point, *sorted((resume_dir / "best").glob("*.ckpt"))]:
+            why = _unreadable_checkpoint(path)
+            if why:
+                log.warning(
+                    "fold %d: %s is unreadable (%s; killed while writing it?): the fold starts again",
+                    k,
+                    path,
+                    why,
+                )
+                resume_point.unlink()
+                shutil.rmtree(resume_dir / "best", ignore_errors=True)
+                break
     if resume_point.exists():
         log.info("fold %d: resuming from its last finished epoch (%s)", k, resume_point)
-    trainer.fit(module, datamodule=dm, ckpt_path=str(resume_point) if resume_point.exists() else None)
+    trainer.fit(
+        module,
+        datamodule=dm,
+        ckpt_path=str(resume_point) if resume_point.exists() else None,
+        weights_only=True,
+    )
     ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
     if ckpt is not None and ckpt.best_model_path:
-        state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=False)["state_dict"]
+        state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=True)["state_dict"]
         module.load_state_dict(state)
     best_val = (
         float(ckpt.best_model_score)
