@@ -119,6 +119,25 @@ def _raised_in_hydra(exc: BaseException) -> bool:
     return tb is not None and package in Path(tb.tb_frame.f_code.co_filename).resolve().parents
 
 
+def _file_system_error(exc: BaseException) -> OSError | None:
+    """The OSError naming a file behind ``exc`` (itself, or its cause: the logging module reports a log
+    file it cannot open as a ValueError caused by it), or None."""
+    while exc is not None:
+        if isinstance(exc, OSError) and exc.filename is not None:
+            return exc
+        exc = exc.__cause__
+    return None
+
+
+def _run_directory_message(exc: OSError) -> str:
+    if exc.errno in NO_ROOM:
+        return _no_room_message(exc)
+    return (
+        f"cannot write {exc.filename} ({exc.strerror}): choose a writable output folder with "
+        "output_root=<dir> (or hydra.run.dir=<dir>)"
+    )
+
+
 def run_hydra_app(app, program: str):
     """Runs a ``@hydra.main`` function: what Hydra refuses while composing the configuration from the
     command line (a misspelled key, an unknown config option, a malformed override) ends the program with
@@ -132,14 +151,15 @@ def run_hydra_app(app, program: str):
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it
     try:
         return app()
-    except (HydraException, OmegaConfBaseException, ValueError) as exc:
+    except (HydraException, OmegaConfBaseException, ValueError, OSError) as exc:
         # an error from inside the task (one_line_errors marks it) is not the command line's: it keeps
         # its traceback, as a bug should; of ValueErrors only Hydra's own (conflicting flags) are
-        if (
-            wants_traceback()
-            or getattr(exc, "raised_in_task", False)
-            or (isinstance(exc, ValueError) and not _raised_in_hydra(exc))
-        ):
+        if wants_traceback() or getattr(exc, "raised_in_task", False):
+            raise
+        file_error = _file_system_error(exc)
+        if file_error is not None:  # the run directory or its log could not be created or written
+            sys.exit(f"{program}: error: {_run_directory_message(file_error)}")
+        if isinstance(exc, OSError) or (isinstance(exc, ValueError) and not _raised_in_hydra(exc)):
             raise
         sys.exit(f"{program}: error: {hydra_error_line(exc)}")
     finally:
