@@ -66,19 +66,21 @@ def checked_simulate_config(cfg: DictConfig):
 class CheckBeforeRunDirectory(Callback):
     """Checks a single run's settings before Hydra creates its run directory (``on_run_start``), so that
     a rejected run leaves no directory behind: ``check`` is the dotted name of a function of the composed
-    config that raises ``InputError``; ``program`` names the entry point in the one-line error."""
+    config that raises ``InputError``, which ``rheograph.errors.run_hydra_app`` prints as one line."""
 
-    def __init__(self, check: str, program: str):
-        self.check, self.program = check, program
+    def __init__(self, check: str):
+        self.check = check
 
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
         import importlib
 
-        from rheograph.errors import one_line_errors
+        from rheograph.errors import InputError, RefusedBeforeRun
 
         module, _, name = self.check.rpartition(".")
-        with one_line_errors(self.program):
+        try:
             getattr(importlib.import_module(module), name)(config)
+        except InputError as exc:
+            raise RefusedBeforeRun(exc) from exc
 
 
 # Hydra's own files in a run directory it has just created (its configuration and the job's log)

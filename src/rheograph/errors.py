@@ -40,6 +40,16 @@ class OtherRunError(InputError):
     into it would mix them."""
 
 
+class RefusedBeforeRun(BaseException):
+    """Carries an ``InputError`` raised before Hydra makes the run directory (in a Hydra callback, whose
+    ``Exception``s Hydra only turns into warnings) out to ``run_hydra_app``, which ends the program with
+    it as one line."""
+
+    def __init__(self, error: InputError):
+        super().__init__(str(error))
+        self.error = error
+
+
 def _no_room_message(exc: OSError) -> str:
     where = f" {exc.filename}" if exc.filename else ""
     return (
@@ -151,6 +161,10 @@ def run_hydra_app(app, program: str):
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it
     try:
         return app()
+    except RefusedBeforeRun as refused:
+        if wants_traceback():
+            raise refused.error from None
+        sys.exit(f"{program}: error: {refused.error}")
     except (HydraException, OmegaConfBaseException, ValueError, OSError) as exc:
         # an error from inside the task (one_line_errors marks it) is not the command line's: it keeps
         # its traceback, as a bug should; of ValueErrors only Hydra's own (conflicting flags) are
