@@ -170,10 +170,12 @@ def run_hydra_app(app, program: str):
         # its traceback, as a bug should; of ValueErrors only Hydra's own (conflicting flags) are
         if wants_traceback() or getattr(exc, "raised_in_task", False):
             raise
+        if isinstance(exc, (HydraException, OmegaConfBaseException)):  # (a missing config is an OSError)
+            sys.exit(f"{program}: error: {hydra_error_line(exc)}")
         file_error = _file_system_error(exc)
         if file_error is not None:  # the run directory or its log could not be created or written
             sys.exit(f"{program}: error: {_run_directory_message(file_error)}")
-        if isinstance(exc, OSError) or (isinstance(exc, ValueError) and not _raised_in_hydra(exc)):
+        if isinstance(exc, OSError) or not _raised_in_hydra(exc):
             raise
         sys.exit(f"{program}: error: {hydra_error_line(exc)}")
     finally:
