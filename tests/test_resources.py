@@ -99,6 +99,28 @@ def test_the_address_space_limit_is_what_it_leaves_this_process():
     assert float(limit) <= float(left) * 2**30 * 1.0001
 
 
+def test_a_cgroup_memory_limit_is_what_it_leaves_v2_and_v1(tmp_path):
+    from rheograph.resources import _cgroup_memory_left
+
+    membership = tmp_path / "cgroup"
+    v2 = tmp_path / "v2"
+    (v2 / "job").mkdir(parents=True)
+    membership.write_text("0::/job\n")
+    (v2 / "job" / "memory.max").write_text("max\n")  # no limit
+    assert _cgroup_memory_left(membership, v2) is None
+    (v2 / "job" / "memory.max").write_text("4000000000\n")
+    (v2 / "job" / "memory.current").write_text("1000000000\n")
+    assert _cgroup_memory_left(membership, v2) == 3e9
+    v1 = tmp_path / "v1"
+    (v1 / "memory" / "job").mkdir(parents=True)
+    membership.write_text("5:cpu:/\n4:memory:/job\n0::/\n")
+    (v1 / "memory" / "job" / "memory.limit_in_bytes").write_text("9223372036854771712\n")  # v1's "none"
+    assert _cgroup_memory_left(membership, v1) is None
+    (v1 / "memory" / "job" / "memory.limit_in_bytes").write_text("2000000000\n")
+    (v1 / "memory" / "job" / "memory.usage_in_bytes").write_text("500000000\n")
+    assert _cgroup_memory_left(membership, v1) == 1.5e9
+
+
 MEASURE_SIMULATION = """
 from rheograph.sim import SimParams, Simulation
 

@@ -119,13 +119,14 @@ def _read_number(path: Path) -> float | None:
     return float(text) if text.isdigit() else None  # "max" (v2's unlimited) and unreadable: no limit
 
 
-def _cgroup_memory_left() -> float | None:
-    """What the cgroup's memory limit leaves (limit - usage), v2 or v1; None without a limit."""
+def _cgroup_memory_left(membership=Path("/proc/self/cgroup"), root=Path("/sys/fs/cgroup")) -> float | None:
+    """What the memory limit of this process's cgroup leaves (limit - usage), v2 or v1; None without a
+    limit.  ``membership``: the process's cgroup list; ``root``: where the cgroup file system is mounted."""
     try:
-        lines = Path("/proc/self/cgroup").read_text().splitlines()
+        lines = Path(membership).read_text().splitlines()
     except OSError:
         return None
-    root = Path("/sys/fs/cgroup")
+    root = Path(root)
     candidates = []
     for line in lines:
         hierarchy, _, controllers_path = line.partition(":")
