@@ -46,7 +46,7 @@ def one_error_line(code, output, program):
 @pytest.mark.parametrize("program", ["simulate.py", "train.py"])
 def test_an_output_folder_that_cannot_be_made_is_one_line(tmp_path, program):
     """The run directory under a file (NotADirectoryError: what a read-only folder gives as
-    PermissionError, reproducible as root too): Hydra's traceback before, one line naming it now."""
+    PermissionError, reproducible as root too): one line naming it, not Hydra's traceback."""
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder\n")
     line = one_error_line(*run(program, ["sim=tiny" if program == "simulate.py" else "debug=tiny",
@@ -88,7 +88,7 @@ def tiny_params():
 
 def test_a_state_point_being_created_by_another_process_is_refused_by_name(tmp_path):
     """Two runs of one state point started at the same moment: the second to create the file is refused
-    in one line (before: an HDF5 traceback on the first one's half-made file), the first runs on."""
+    in one line (not an HDF5 traceback on the first one's half-made file), the first runs on."""
     from rheograph.runner import run_state_point
 
     path = tmp_path / "trajectory.h5"
@@ -120,7 +120,7 @@ def test_a_file_made_meanwhile_by_another_process_is_not_overwritten(tmp_path):
 @pytest.mark.slow
 def test_two_simulations_started_at_the_same_moment_on_one_state_point(tmp_path):
     """Both started at once: one runs, the other ends with one line, whichever comes second to make
-    the file (before: an HDF5 traceback).  Which way a race goes is up to the machine: the tests above
+    the file (not an HDF5 traceback).  Which way a race goes is up to the machine: the tests above
     hold each outcome deterministically."""
     cmd = [sys.executable, str(ROOT / "simulate.py"), "sim=tiny", "sim.strain=0.1", f"output_root={tmp_path}",
            "progress=false"]  # fmt: skip
@@ -160,7 +160,7 @@ def test_a_rejected_job_of_a_sweep_leaves_no_run_directory(tmp_path):
 
 @pytest.mark.parametrize("value,shown", [("-1", "-1"), ("abc", "'abc'")])
 def test_tune_n_trials_is_checked_before_any_state_is_created(tmp_path, value, shown):
-    """Before: -1 clipped to 0 without a word, abc a traceback after the study database was made."""
+    """Neither clipped to 0 without a word (-1) nor a traceback once the study database exists (abc)."""
     out = tmp_path / "out"
     line = one_error_line(
         *run("tune.py", [f"tune.n_trials={value}", f"output_root={out}"], tmp_path), "tune.py"

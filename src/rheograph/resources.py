@@ -32,8 +32,9 @@ MEMORY_LIMIT_ENV = "RHEOGRAPH_MEMORY_LIMIT_GB"
 SIMULATION_BYTES_PER_PARTICLE = 6.0e3
 MARGIN = 1.5
 # Graphs held by the graph builder, per particle and snapshot: GRAPH_BYTES_PER_EDGE per edge of a particle
-# plus GRAPH_BYTES_PER_PARTICLE, fitted to peaks measured at N = 2000, phi 0.76 (25 snapshots, edge cutoff
-# 0.5 / 2 / 5 a: 4.6 / 9.7 / 29.6 edges per particle, 366 / 539 / 1338 bytes per particle and snapshot).
+# plus GRAPH_BYTES_PER_PARTICLE, a line just above the peaks measured at N = 2000, phi 0.76 (25 snapshots,
+# edge cutoff 0.5 / 2 / 5 a: 4.6 / 9.7 / 29.6 edges per particle, 366 / 539 / 1338 bytes per particle and
+# snapshot; the line gives 384 / 588 / 1384), times MARGIN.
 GRAPH_BYTES_PER_EDGE = 40.0
 GRAPH_BYTES_PER_PARTICLE = 200.0
 # A shipped model's forward pass (hidden 64, five-model ensemble, run one after the other), per node of a
