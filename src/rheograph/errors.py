@@ -152,7 +152,9 @@ def run_hydra_app(app, program: str):
     """Runs a ``@hydra.main`` function: what Hydra refuses while composing the configuration from the
     command line (a misspelled key, an unknown config option, a malformed override) ends the program with
     one line naming it, like any bad input (Hydra itself prints several lines and a suggestion to add the
-    key with ``+``, which would only hide the misspelling)."""
+    key with ``+``, which would only hide the misspelling).  So do settings refused before the run
+    directory is made (``RefusedBeforeRun``) and a run directory or log file that cannot be made or
+    written (an OSError naming the file, outside the task)."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
