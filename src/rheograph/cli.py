@@ -49,19 +49,74 @@ class SweepFailures(Callback):
             )
 
 
+def checked_simulate_config(cfg: DictConfig):
+    """The ``SimParams`` of a composed ``simulate`` config, once every setting that can be checked
+    without running is: the parameters, the solver backend (an unknown or missing one), and the memory
+    the simulation will need.  Raises ``InputError``."""
+    from rheograph.resources import check_simulation_memory
+    from rheograph.sim.params import SimParams
+    from rheograph.sim.solver import resolve_solver_name
+
+    params = SimParams.from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
+    resolve_solver_name(cfg.solver)
+    check_simulation_memory(params.n_particles)
+    return params
+
+
+class CheckBeforeRunDirectory(Callback):
+    """Checks a single run's settings before Hydra creates its run directory (``on_run_start``), so that
+    a rejected run leaves no directory behind: ``check`` is the dotted name of a function of the composed
+    config that raises ``InputError``, which ``rheograph.errors.run_hydra_app`` prints as one line."""
+
+    def __init__(self, check: str):
+        self.check = check
+
+    def on_run_start(self, config: DictConfig, **kwargs) -> None:
+        import importlib
+
+        from rheograph.errors import InputError, RefusedBeforeRun
+
+        module, _, name = self.check.rpartition(".")
+        try:
+            getattr(importlib.import_module(module), name)(config)
+        except InputError as exc:
+            raise RefusedBeforeRun(exc) from exc
+
+
+# Hydra's own files in a run directory it has just created (its configuration and the job's log)
+HYDRA_RUN_FILES = (".hydra", "{job}.log")
+
+
+def remove_run_directory_of_rejected_job(run_dir: Path, job_name: str) -> None:
+    """Removes a sweep job's run directory that holds nothing but what Hydra wrote on creating it (a
+    sweep's jobs are checked only once Hydra has made their directories): a rejected job leaves none."""
+    own = {name.format(job=job_name) for name in HYDRA_RUN_FILES}
+    try:
+        entries = list(run_dir.iterdir())
+    except OSError:
+        return
+    if entries and all(entry.name in own for entry in entries):
+        import shutil
+
+        shutil.rmtree(run_dir, ignore_errors=True)
+
+
 def simulate_main(cfg: DictConfig) -> dict:
     """Run one state point from a composed ``simulate`` config; returns the run's summary (simulate.py
     has made the linear algebra single-threaded before anything loaded it)."""
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
-    from rheograph.errors import StatePointError
+    from rheograph.errors import InputError, StatePointError
     from rheograph.runner import run_state_point
-    from rheograph.sim.params import SimParams
-    from rheograph.sim.solver import resolve_solver_name
 
-    params = SimParams.from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
-    resolve_solver_name(cfg.solver)  # an unknown or missing backend is refused before any work
+    try:
+        params = checked_simulate_config(cfg)
+    except InputError:
+        if HydraConfig.initialized():
+            hydra_cfg = HydraConfig.get()
+            remove_run_directory_of_rejected_job(Path(hydra_cfg.runtime.output_dir), hydra_cfg.job.name)
+        raise
     if params.steady_state_strain >= params.strain:  # allowed (e.g. a start-up study), but said
         log.warning(
             "sim.steady_state_strain=%g >= sim.strain=%g: no steady window, the steady averages of this "
@@ -145,7 +200,10 @@ def train_main(cfg: DictConfig) -> float:
             summary["baseline/physics_offset/r2_log_pressure"],
             summary["baseline/physics_offset/r2_z_mu"],
         )
-    log.info("report: %s (all metrics: metrics.json)", run_dir / "report.md")
+    if cfg.get("report", True):
+        log.info("report: %s (all metrics: metrics.json)", run_dir / "report.md")
+    else:
+        log.info("all metrics: %s (no report: report=false)", run_dir / "metrics.json")
     return summary["val/loss"]
 
 

@@ -40,6 +40,16 @@ class OtherRunError(InputError):
     into it would mix them."""
 
 
+class RefusedBeforeRun(BaseException):
+    """Carries an ``InputError`` raised before Hydra makes the run directory (in a Hydra callback, whose
+    ``Exception``s Hydra only turns into warnings) out to ``run_hydra_app``, which ends the program with
+    it as one line."""
+
+    def __init__(self, error: InputError):
+        super().__init__(str(error))
+        self.error = error
+
+
 def _no_room_message(exc: OSError) -> str:
     where = f" {exc.filename}" if exc.filename else ""
     return (
@@ -133,11 +143,32 @@ def refuse_unpickling_flags(program: str, argv: list[str]) -> None:
             )
 
 
+def _file_system_error(exc: BaseException) -> OSError | None:
+    """The OSError naming a file behind ``exc`` (itself, or its cause: the logging module reports a log
+    file it cannot open as a ValueError caused by it), or None."""
+    while exc is not None:
+        if isinstance(exc, OSError) and exc.filename is not None:
+            return exc
+        exc = exc.__cause__
+    return None
+
+
+def _run_directory_message(exc: OSError) -> str:
+    if exc.errno in NO_ROOM:
+        return _no_room_message(exc)
+    return (
+        f"cannot write {exc.filename} ({exc.strerror}): choose a writable output folder with "
+        "output_root=<dir> (or hydra.run.dir=<dir>)"
+    )
+
+
 def run_hydra_app(app, program: str):
     """Runs a ``@hydra.main`` function: what Hydra refuses while composing the configuration from the
     command line (a misspelled key, an unknown config option, a malformed override) ends the program with
     one line naming it, like any bad input (Hydra itself prints several lines and a suggestion to add the
-    key with ``+``, which would only hide the misspelling)."""
+    key with ``+``, which would only hide the misspelling).  So do settings refused before the run
+    directory is made (``RefusedBeforeRun``) and a run directory or log file that cannot be made or
+    written (an OSError naming the file, outside the task)."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
@@ -147,14 +178,21 @@ def run_hydra_app(app, program: str):
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises what it refuses instead of printing it
     try:
         return app()
-    except (HydraException, OmegaConfBaseException, ValueError) as exc:
+    except RefusedBeforeRun as refused:
+        if wants_traceback():
+            raise refused.error from None
+        sys.exit(f"{program}: error: {refused.error}")
+    except (HydraException, OmegaConfBaseException, ValueError, OSError) as exc:
         # an error from inside the task (one_line_errors marks it) is not the command line's: it keeps
         # its traceback, as a bug should; of ValueErrors only Hydra's own (conflicting flags) are
-        if (
-            wants_traceback()
-            or getattr(exc, "raised_in_task", False)
-            or (isinstance(exc, ValueError) and not _raised_in_hydra(exc))
-        ):
+        if wants_traceback() or getattr(exc, "raised_in_task", False):
+            raise
+        if isinstance(exc, (HydraException, OmegaConfBaseException)):  # (a missing config is an OSError)
+            sys.exit(f"{program}: error: {hydra_error_line(exc)}")
+        file_error = _file_system_error(exc)
+        if file_error is not None:  # the run directory or its log could not be created or written
+            sys.exit(f"{program}: error: {_run_directory_message(file_error)}")
+        if isinstance(exc, OSError) or not _raised_in_hydra(exc):
             raise
         sys.exit(f"{program}: error: {hydra_error_line(exc)}")
     finally:

@@ -37,6 +37,7 @@ from rheograph.graphs.features import (
 )
 from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.io.snapshots import Snapshots, read_snapshots, wrap_into_box
+from rheograph.resources import check_memory, graph_bytes
 
 TARGETS = ("viscosity", "pressure", "z_mu")
 # the step settings of the one-solve input (rheograph.graphs.features.solve_viscosity): numerics of the
@@ -282,6 +283,11 @@ def snapshot_graphs(
         keep = keep[:: settings.snapshot_every]
     else:
         keep = np.arange(len(snaps))
+    check_memory(
+        graph_bytes(snaps.n_particles, keep.size, snaps.phi, settings.cutoff, params["size_ratio"]),
+        f"{path}: the graphs of {keep.size} snapshot(s) of {snaps.n_particles} particles",
+        "give fewer snapshots or particles per file (or a shorter graph.cutoff)",
+    )
     contacts = [None] * keep.size
     if set(settings.edge_features) & set(HISTORY_EDGE_FEATURES):
         if snaps.contacts is None:

@@ -156,9 +156,48 @@ class TrajectoryFile:
         self.h5: h5py.File | None = None
 
     # ---- opening -----------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def _creation_lock(self):
+        """Held while a new file is made: of two processes started at the same moment on one state point,
+        the second is refused by name instead of failing inside HDF5 on the first one's half-made file.
+        The lock (``flock`` on ``<name>.creating``) goes with the process, also when it is killed."""
+        lock = self.path.with_name(self.path.name + ".creating")
+        try:
+            handle = open(lock, "a")
+        except OSError as exc:
+            raise TrajectoryFileError(
+                f"cannot create {lock} ({exc.strerror}): choose a writable output folder (output_root=<dir>)"
+            ) from exc
+        with handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as exc:
+                raise TrajectoryFileError(
+                    f"{self.path} is being created by another process: is this state point already running?"
+                ) from exc
+            try:
+                if self.path.exists():  # made meanwhile by a process that started at the same moment
+                    raise TrajectoryFileError(
+                        f"{self.path} was created by another process meanwhile: is this state point "
+                        "already running?"
+                    )
+                yield
+            finally:
+                lock.unlink(missing_ok=True)  # while still held: a later process finds the file made
+
     def open_new(self, state: SimState) -> None:
+        with self._creation_lock():
+            self._create(state)
+
+    def _create(self, state: SimState) -> None:
         tmp = self.path.with_suffix(self.path.suffix + ".tmp")
-        with h5py.File(tmp, "w") as h5:
+        try:
+            h5 = h5py.File(tmp, "w")
+        except OSError as exc:
+            raise TrajectoryFileError(
+                f"cannot create {tmp} ({exc}): choose a writable output folder (output_root=<dir>)"
+            ) from exc
+        with h5:
             h5.attrs["schema_version"] = SCHEMA_VERSION
             h5.attrs["producer"] = PRODUCER
             h5.attrs["status"] = "running"
@@ -211,7 +250,14 @@ class TrajectoryFile:
         self.write_checkpoint(state, {})
         self.h5.close()
         tmp.replace(self.path)  # the file appears only once it is a valid trajectory with a checkpoint
-        self.h5 = h5py.File(self.path, "r+")
+        try:
+            self.h5 = h5py.File(self.path, "r+")
+        except OSError as exc:  # another process, started at the same moment, opened it first
+            if "unable to lock file" not in str(exc).lower():
+                raise
+            raise TrajectoryFileError(
+                f"{self.path} was opened by another process meanwhile: is this state point already running?"
+            ) from exc
 
     def open_existing(self) -> tuple[SimState, dict]:
         """Open for resuming; verify the file and return (state, runner counters) from the checkpoint.

@@ -20,7 +20,9 @@ model) names it.
 
 from __future__ import annotations
 
+import difflib
 import json
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,12 +32,20 @@ import numpy as np
 
 from rheograph.errors import InputError
 
+log = logging.getLogger("rheograph")
+
 # what a snapshot's physics depends on: they describe the suspension and come with the snapshot
 PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "critical_load", "size_ratio")
 # of them, those a bare file must carry (critical_load is the unit of force, 1 by definition, and the size
 # ratio is read off the radii)
 BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")
 TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
+# every key a bare snapshot file may hold (module docstring); dt_max and lagged_step_control, the rest of
+# the step a source was made with, are recorded by write_bare beside disp_max
+BARE_KEYS = (
+    "positions", "radii", "box", "le_offset", "stress", "phi", *PHYSICAL_PARAMS, "strain", *TARGET_KEYS,
+    "position_noise", "disp_max", "dt_max", "lagged_step_control",
+)  # fmt: skip
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
 
@@ -276,9 +286,29 @@ def read_bare(path: str | Path, params: dict | None = None) -> Snapshots:
     return snapshots_from_values({**_bare_values(Path(path)), **(params or {})}, str(path), kind="bare")
 
 
+def unknown_keys_warning(keys, where: str) -> str | None:
+    """The warning for keys of a bare snapshot file that it has no use for (a misspelt optional key
+    would otherwise be ignored without a word), each with the closest known key; None when all are
+    known."""
+    unknown = sorted(set(keys) - set(BARE_KEYS))
+    if not unknown:
+        return None
+    named = []
+    for key in unknown:
+        close = difflib.get_close_matches(key, BARE_KEYS, n=1)
+        named.append(f"{key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    return (
+        f"{where}: key(s) {', '.join(named)} ignored: a bare snapshot file's keys are {list(BARE_KEYS)} "
+        "(docs/data_format.md)"
+    )
+
+
 def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snapshots:
     """``Snapshots`` from the keys of a bare snapshot file (module docstring), checked; ``where`` names
-    the source in messages."""
+    the source in messages.  Keys it does not know are named in a warning (``unknown_keys_warning``)."""
+    warning = unknown_keys_warning(values, where)
+    if warning:
+        log.warning("%s", warning)
     # the stress may be unknown (a positions-only model reads none): NaN then, refused by every model
     # that needs it (rheograph.graphs.dataset.snapshot_graphs)
     required = ("positions", "radii", "box", "le_offset", "phi", *BARE_REQUIRED_PARAMS)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import glob
 import json
+import logging
 from pathlib import Path
 
 import lightning as L
@@ -34,7 +35,10 @@ from rheograph.learn.device_batch import DeviceGraphSet, device_loader
 from rheograph.learn.jamming import fit_jam_map
 from rheograph.naming import state_point_key
 
+log = logging.getLogger("rheograph")
+
 SPLITS = ("random", "grouped", "phi")
+LISTED_FILES = 10  # files named in the warning about files left out of a training set (then a count)
 
 
 # bumped when the fold assignment changes, so that run directories trained on other splits are not
@@ -150,9 +154,21 @@ class SnapshotDataModule(L.LightningDataModule):
         for key, wanted in (("phi", self.phi), ("n_particles", self.n_particles)):
             if wanted is None:
                 continue
-            files = [f for f in files if np.isclose(trajectory_param(f, key, self.lfdem_params), wanted)]
+            values = {f: trajectory_param(f, key, self.lfdem_params) for f in files}
+            left_out = [f for f in files if not np.isclose(values[f], wanted)]
+            files = [f for f in files if f not in left_out]
             if not files:
-                raise InputError(f"data.{key}={wanted}: no trajectory with this value in data.files")
+                raise InputError(
+                    f"data.{key}={wanted}: no trajectory with this value in data.files (they hold "
+                    f"{key} = {', '.join(f'{v:g}' for v in sorted(set(values.values())))})"
+                )
+            if left_out:  # said, so that a file meant for the set but made at other settings is noticed
+                named = [f"{f} ({key} {values[f]:g})" for f in left_out[:LISTED_FILES]]
+                more = len(left_out) - len(named)
+                log.warning(
+                    "data.%s=%g: %d file(s) of data.files at another %s left out of this training set: %s%s",
+                    key, wanted, len(left_out), key, ", ".join(named), f" and {more} more" if more else "",
+                )  # fmt: skip
         return files
 
     def setup(self, stage=None):

@@ -57,6 +57,7 @@ from rheograph.learn.module import TARGET_NAMES, SurrogateModule, network_hparam
 from rheograph.learn.networks import registered_network
 from rheograph.learn.registry import list_models, model_paths, read_card
 from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
+from rheograph.resources import check_memory, prediction_bytes
 
 # Models trained on simulator output read overlaps of ~1e-3 a exactly (positions stored to 1e-7 a):
 # positions known only to a worse RMS precision [a] than this are outside their domain.  Set just above
@@ -350,6 +351,13 @@ class Surrogate:
         notes = self.check_params(snaps, accept_mismatch)
         if not len(snaps):
             raise InputError(f"{snaps.source}: holds no snapshot")
+        check_memory(
+            prediction_bytes(
+                snaps.n_particles, len(snaps), snaps.phi, self.settings.cutoff, snaps.params["size_ratio"]
+            ),
+            f"{snaps.source}: predicting {len(snaps)} snapshot(s) of {snaps.n_particles} particles",
+            "split the snapshots over several files or calls",
+        )
         graphs = snapshot_graphs(
             snaps,
             self.settings,

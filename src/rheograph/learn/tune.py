@@ -174,6 +174,24 @@ def check_study_space(study: optuna.Study, space: dict) -> None:
                 )
 
 
+def check_tune_settings(cfg: DictConfig) -> None:
+    """The study's own numbers, checked before anything is created (the run directory, the study's
+    database): ``tune.n_trials`` (the study's total, finished trials included), the heartbeat, the
+    worker number and the sampler's seed.  Raises ``InputError``."""
+    t = cfg.tune
+
+    def whole(key: str, value, least: int, meaning: str) -> None:
+        if not isinstance(value, int) or isinstance(value, bool) or value < least:
+            raise InputError(f"tune.{key}={value!r} is invalid: an integer >= {least} ({meaning})")
+
+    whole("n_trials", t.n_trials, 1, "the study's total number of trials, finished ones included")
+    whole("heartbeat_seconds", t.heartbeat_seconds, 1, "seconds between a running trial's heartbeats")
+    whole("grace_seconds", t.grace_seconds, 1, "seconds of silence after which a trial counts as dead")
+    whole("worker", t.get("worker", 0), 0, "one per worker of a shared study")
+    if t.sampler_seed is not None:
+        whole("sampler_seed", t.sampler_seed, 0, "or null: unseeded")
+
+
 def sampler_seed(tune_cfg: DictConfig, trials_so_far: int) -> int | None:
     """The TPE sampler's seed for one invocation: ``tune.sampler_seed`` for a new study (reproducible), mixed
     with the number of trials the study already holds and ``tune.worker``, so that a resumed study and
@@ -192,6 +210,7 @@ def sampler_seed(tune_cfg: DictConfig, trials_so_far: int) -> int | None:
 
 
 def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
+    check_tune_settings(cfg)
     t = cfg.tune
     # heartbeats: a trial whose process died (a killed session, a lost node) stops heartbeating and is
     # marked FAIL when the study next runs, then retried once with the same parameters; without them
@@ -226,7 +245,7 @@ def run_study(cfg: DictConfig, run_root: Path, objective=None) -> optuna.Study:
     if t.get("enqueue_defaults") and objective is None:
         enqueue_defaults(study, cfg)
     done = sum(s.state.is_finished() for s in study.trials)
-    remaining = max(0, int(t.n_trials) - done)
+    remaining = max(0, t.n_trials - done)  # a study resumed with a lower n_trials runs no more
     log.info("study %s in %s: %d trials finished, %d to run", t.study_name, t.storage, done, remaining)
     study.optimize(
         objective or make_objective(cfg, run_root),

@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from rheograph.resources import check_simulation_memory
 from rheograph.sim import contacts
 from rheograph.sim.assembly import assemble_resistance, build_pattern
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry, wrap_offset, wrap_positions
@@ -289,6 +290,8 @@ class Simulation:
 
     def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "auto"):
         self.params = params
+        # refused before the initial configuration or any matrix is allocated
+        check_simulation_memory(params.n_particles)
         if state is None:
             pos, radii, box = initial_configuration(params)
             state = SimState(positions=pos, radii=radii, lx=box, ly=box)
