@@ -100,7 +100,8 @@ def render(data: dict) -> str:
         out += [f"Training epoch of fold 0 ({graphs} graphs of N = 400, width 32; validation excluded):", ""]
         out += epoch_table(parts["a"]) + [""]
     if "b" in parts:
-        out += ["Each fold, 60 epochs (wall: training, test predictions, descriptor baselines):", ""]
+        epochs = next(iter(parts["b"].values()))[0]["epochs"]
+        out += [f"Each fold, {epochs} epochs (wall: training, test predictions, descriptor baselines):", ""]
         out += fold_table(parts["b"]) + [""]
     if "c" in parts:
         out += ["All folds end to end through `train.py` (graph cache built):", ""]

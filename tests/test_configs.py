@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from rheograph.cli import register_resolvers
+from rheograph.errors import InputError
 from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,7 +53,11 @@ def test_training_experiments_compose(name, tiny_files):
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"experiment={name}"])
-    check_run_settings(cfg)
+    if cfg.trainer.accelerator == "gpu" and not torch.cuda.is_available():  # a GPU experiment, CPU machine
+        with pytest.raises(InputError, match="no CUDA GPU"):
+            check_run_settings(cfg)
+    else:
+        check_run_settings(cfg)
     assert folds_to_train(cfg)
     settings = graph_settings(cfg)
     module = instantiate(

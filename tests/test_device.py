@@ -111,6 +111,16 @@ def compose_train(overrides):
         return compose(config_name="train", overrides=overrides)
 
 
+def test_how_batches_are_assembled_is_not_part_of_the_run_fingerprint():
+    """A run trained with the device-resident sets resumes and reports with the per-batch loader (the
+    same batches), while a batch size of its own is another configuration."""
+    from rheograph.learn.train import config_fingerprint
+
+    base = config_fingerprint(compose_train(["~logger"]))
+    assert config_fingerprint(compose_train(["~logger", "data.device_resident=false"])) == base
+    assert config_fingerprint(compose_train(["~logger", "data.batch_size=7"])) != base
+
+
 @NO_GPU
 def test_gpu_trainer_without_a_gpu_is_refused_in_one_line():
     from rheograph.learn.train import check_run_settings

@@ -558,7 +558,7 @@ def predict_dataset(module, dataset, batch_size: int = 64, device=None):
     preds, trues, stress, phi, run, jammed, size = [], [], [], [], [], [], []
     for batch in DataLoader(dataset, batch_size=batch_size):
         preds.append(module(batch.to(device)).cpu().numpy())
-        batch = batch.cpu()
+        batch = batch.cpu()  # moved in place: its truths and metadata back as numpy
         trues.append(batch.y_raw.numpy())
         stress.append(batch.stress.numpy())
         phi.append(batch.phi.numpy())
