@@ -27,6 +27,7 @@ from rheograph.graphs.features import (
     SHELL_INPUTS,
     SHELL_WIDTHS,
     STRESS_EDGE_FEATURES,
+    check_separations,
     forward_transform,
     node_features,
     relax_positions,
@@ -291,6 +292,8 @@ def snapshot_graphs(
     # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
     positions, offsets = snaps.positions, snaps.le_offset
+    for idx in keep:
+        check_separations(f"{path}, snapshot {idx}", positions[idx], radii, lx, ly, offsets[idx])
     # the strain each snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
     # that arrested within the step budget, which predictions flag
     relaxed = np.full(len(snaps), np.nan)

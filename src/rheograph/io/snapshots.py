@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,6 +38,18 @@ PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "
 # ratio is read off the radii)
 BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")
 TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
+# what reading a damaged or malformed file raises: a cut or bit-flipped zip (.npz), gzip or HDF5 file, or
+# values of the wrong type or shape
+DAMAGED_FILE_ERRORS = (
+    OSError,
+    EOFError,
+    zipfile.BadZipFile,
+    zlib.error,
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+)
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
 
@@ -134,6 +148,24 @@ def check_geometry(where: str, radii, lx, ly, phi) -> None:
         )
 
 
+def check_configurations(where: str, positions, radii, le_offset, strain, targets) -> None:
+    """Positions (S, N, 2) [a] and offsets (S,) [a] finite, with N the radii's; strain (S,) and targets
+    (S, 3) finite or NaN (unknown), never infinite: what a damaged file gives otherwise."""
+    n_snap = len(positions)
+    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
+        raise InputError(
+            f"{where}: positions must be (S, N, 2) with N = {radii.size} (the radii), found {positions.shape}"
+        )
+    if not np.all(np.isfinite(positions)):
+        raise InputError(f"{where}: positions contain non-finite values")
+    if le_offset.shape != (n_snap,) or not np.all(np.isfinite(le_offset)):
+        raise InputError(f"{where}: le_offset must be ({n_snap},) finite numbers, one per snapshot")
+    if strain.shape != (n_snap,) or targets.shape != (n_snap, 3):
+        raise InputError(f"{where}: the strain and the targets need one value per snapshot ({n_snap})")
+    if np.isinf(strain).any() or np.isinf(targets).any():
+        raise InputError(f"{where}: the strain or the targets contain infinite values")
+
+
 def _size_ratio(radii) -> float:
     return round(float(np.max(radii) / np.min(radii)), 6)
 
@@ -170,8 +202,10 @@ def read_trajectory(path: str | Path) -> Snapshots:
                 raise InputError(f"{path}: no /{key}: not a trajectory (docs/data_format.md)")
         try:
             params = json.loads(h5.attrs["params"])
-        except (KeyError, ValueError) as exc:
+        except (KeyError, ValueError, TypeError) as exc:
             raise InputError(f"{path}: no readable root attribute 'params' (JSON of the sim.* keys)") from exc
+        if not isinstance(params, dict):
+            raise InputError(f"{path}: its root attribute 'params' is not a JSON object of the sim.* keys")
         for key in ("stress", "phi"):
             if key not in params:
                 raise InputError(f"{path}: its params lack '{key}' (the state point): add it to the file")
@@ -188,7 +222,7 @@ def read_trajectory(path: str | Path) -> Snapshots:
             count = min(count, int(counters.get("snapshots", count)))
         positions = sn["positions"][:count].astype(np.float64)
         offsets = sn["le_offset"][:count].astype(np.float64)
-        strain = sn["strain"][:count] if "strain" in sn else np.full(count, np.nan)
+        strain = sn["strain"][:count].astype(np.float64) if "strain" in sn else np.full(count, np.nan)
         targets = np.stack(
             [
                 sn[name][:count] if name in sn else np.full(count, np.nan)
@@ -224,6 +258,7 @@ def read_trajectory(path: str | Path) -> Snapshots:
             ]
     phi, stress = float(params["phi"]), float(params["stress"])
     check_geometry(str(path), radii, lx, ly, phi)
+    check_configurations(str(path), positions, radii, offsets, strain, targets)
     physical = {k: params[k] for k in PHYSICAL_PARAMS if k in params}
     numerics = {k: params[k] for k in ("disp_max", "dt_max", "lagged_step_control") if k in params}
     return Snapshots(
@@ -260,11 +295,23 @@ def _bare_values(path: Path) -> dict:
         return values
 
 
-def _scalar(values: dict, key: str, where: str) -> float:
+def _numbers(values: dict, key: str, where: str) -> np.ndarray:
+    """``values[key]`` as float64 numbers; a complex, text or other non-numeric value is refused by name
+    (numpy would drop an imaginary part with only a warning)."""
+    value = values[key]
+    if np.iscomplexobj(value):
+        raise InputError(f"{where}: '{key}' must be real numbers, found complex ones")
     try:
-        value = float(np.asarray(values[key], dtype=np.float64).reshape(()))
+        return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{where}: '{key}' must be one number") from exc
+        raise InputError(f"{where}: '{key}' must be numbers, found {np.asarray(value).dtype}") from exc
+
+
+def _scalar(values: dict, key: str, where: str) -> float:
+    numbers = _numbers(values, key, where)
+    if numbers.size != 1:
+        raise InputError(f"{where}: '{key}' must be one number, found {numbers.size}")
+    value = float(numbers.reshape(()))
     if not math.isfinite(value):
         raise InputError(f"{where}: '{key}' = {value} is not finite")
     return value
@@ -294,10 +341,10 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
                 else ""
             )
         )
-    positions = np.asarray(values["positions"], dtype=np.float64)
+    positions = _numbers(values, "positions", where)
     if positions.ndim == 2:
         positions = positions[None]
-    radii = np.asarray(values["radii"], dtype=np.float64).reshape(-1)
+    radii = _numbers(values, "radii", where).reshape(-1)
     if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
         raise InputError(
             f"{where}: positions must be (S, N, 2) or (N, 2) with N = {radii.size} (the radii), "
@@ -306,11 +353,11 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     if not np.all(np.isfinite(positions)):
         raise InputError(f"{where}: positions contain non-finite values")
     n_snap = positions.shape[0]
-    box = np.asarray(values["box"], dtype=np.float64).reshape(-1)
+    box = _numbers(values, "box", where).reshape(-1)
     if box.size != 2:
         raise InputError(f"{where}: box must be (Lx, Ly), found {box.size} value(s)")
     lx, ly = float(box[0]), float(box[1])
-    offsets = np.asarray(values["le_offset"], dtype=np.float64).reshape(-1)
+    offsets = _numbers(values, "le_offset", where).reshape(-1)
     if offsets.size == 1:
         offsets = np.full(n_snap, offsets[0])
     if offsets.size != n_snap or not np.all(np.isfinite(offsets)):
@@ -333,7 +380,7 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     def series(key):
         if key not in values:
             return np.full(n_snap, np.nan)
-        out = np.asarray(values[key], dtype=np.float64).reshape(-1)
+        out = _numbers(values, key, where).reshape(-1)
         if out.size != n_snap:
             raise InputError(f"{where}: '{key}' needs one value per snapshot ({n_snap}), found {out.size}")
         return out
@@ -433,7 +480,7 @@ def _read_source(path: str | Path, lfdem_params: str | Path | None, params: dict
         return read_trajectory(path) if kind == "rheograph" else read_bare(path, params)
     except InputError:
         raise
-    except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:  # damaged or malformed content
+    except DAMAGED_FILE_ERRORS as exc:
         raise InputError(
             f"{path}: cannot be read as {KIND_NAMES[kind]} ({type(exc).__name__}: {exc}); is it truncated "
             "or of another format?"

@@ -249,6 +249,20 @@ def domain_report(
     return np.array([not r for r in rows], dtype=bool), rows
 
 
+def ensemble_mean_std(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation over axis 0 (the fold models) of finite ``values`` (models, S); for
+    values so large that the sum of squares overflows, computed in units of their largest magnitude
+    (finite then too)."""
+    with np.errstate(over="ignore"):
+        mean, std = values.mean(axis=0), values.std(axis=0)
+    overflow = ~(np.isfinite(mean) & np.isfinite(std))
+    if overflow.any():
+        scale = np.abs(values[:, overflow]).max(axis=0)
+        unit = values[:, overflow] / scale
+        mean[overflow], std[overflow] = unit.mean(axis=0) * scale, unit.std(axis=0) * scale
+    return mean, std
+
+
 class Surrogate:
     """An ensemble of fold models with what they were trained on (``domain``) and, for a shipped model,
     its card; ``load_model`` makes one."""
@@ -339,6 +353,7 @@ class Surrogate:
             pred, true, meta = predict_dataset(module, graphs, batch_size=64)
             preds.append(pred)
         preds = np.stack(preds)  # (models, S, 3)
+        overflow = np.flatnonzero(~np.isfinite(preds).all(axis=(0, 2)))
         extra = {}
         if positions_only:
             per_stress = preds[:, :, 1].copy()
@@ -348,6 +363,26 @@ class Surrogate:
             preds[:, :, 1] = per_stress * snaps.stress  # NaN where sigma is unknown
             meta["stress"] = np.full(len(graphs), snaps.stress)
         in_domain, row_reasons = domain_report(self.domain, snaps, graphs, self.settings, self.min_strain)
+        if overflow.size:
+            k = overflow[0]
+            raise InputError(
+                f"{snaps.source}: model {self.label}'s prediction for snapshot(s) {overflow[:5].tolist()} is "
+                f"not a finite number, their inputs lie that far outside its training (snapshot {k}: "
+                f"{'; '.join(row_reasons[k]) or 'no reason found'}); are the positions in units of the small "
+                "radius a?"
+            )
+        # physics only, nothing learned: the one-solve eta_r, the contact-spring pressure, the counted Z_mu
+        physics = np.concatenate([g.physics.numpy() for g in graphs]).astype(np.float64)
+        # a solve whose shear rate vanishes or runs against the stress has no viscosity to report (a
+        # configuration no flowing suspension takes: overlaps far beyond the simulator's); NaN: not solved
+        no_viscosity = (physics[:, 0] <= 0) | np.isinf(physics[:, 0])
+        for k in np.flatnonzero(no_viscosity):
+            row_reasons[k].append(
+                f"the one-solve gives eta_r = {physics[k, 0]:.3g}, not a viscosity (its shear rate vanishes "
+                "or runs against the stress): eta_solve left empty"
+            )
+        physics[no_viscosity, 0] = np.nan
+        in_domain &= ~no_viscosity
         row_reasons = [notes + r for r in row_reasons]
         in_domain &= not notes
         if not in_domain.all():
@@ -372,8 +407,6 @@ class Surrogate:
         out.update(extra)
         if "jam_map" in self.domain and not positions_only:
             out["jammed_fraction"] = jammed_fraction(self.domain["jam_map"], meta["phi"], meta["stress"])
-        # physics only, nothing learned: the one-solve eta_r, the contact-spring pressure, the counted Z_mu
-        physics = np.concatenate([g.physics.numpy() for g in graphs])
         out.update(eta_solve=physics[:, 0], pressure_spring=physics[:, 1], z_mu_counted=physics[:, 2])
         errors = (
             predicted_error(self.error_model, meta["stress"], meta["phi"])
@@ -381,8 +414,7 @@ class Surrogate:
             else None
         )
         for k, name in enumerate(TARGET_NAMES):
-            out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
-            out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
+            out[f"{name}_pred"], out[f"{name}_pred_std"] = ensemble_mean_std(preds[:, :, k])
             if errors is not None:
                 out[f"{name}_pred_err"] = errors[:, k]
             out[f"{name}_sim"] = true[:, k]
