@@ -213,23 +213,21 @@ def read_trajectory(path: str | Path) -> Snapshots:
             if key not in h5.attrs:
                 raise InputError(f"{path}: no root attribute '{key}' (box length [a])")
         lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
-        radii = h5["radii"][()].astype(np.float64)
+        radii = _numbers({"radii": h5["radii"][()]}, "radii", str(path))
         sn = h5["snapshots"]
         count = sn["positions"].shape[0]
         if opened != path or str(h5.attrs.get("status", "")) == "running":
             # rows a running file appended after its last checkpoint may be half written
             counters = json.loads(h5["checkpoint"].attrs["counters"]) if "checkpoint" in h5 else {}
             count = min(count, int(counters.get("snapshots", count)))
-        positions = sn["positions"][:count].astype(np.float64)
-        offsets = sn["le_offset"][:count].astype(np.float64)
-        strain = sn["strain"][:count].astype(np.float64) if "strain" in sn else np.full(count, np.nan)
-        targets = np.stack(
-            [
-                sn[name][:count] if name in sn else np.full(count, np.nan)
-                for name in ("viscosity", "pressure", "z_mu")
-            ],
-            axis=1,
-        ).astype(np.float64)
+
+        def rows(name):  # the first count rows of a dataset of /snapshots, as numbers
+            if name not in sn:
+                return np.full(count, np.nan)
+            return _numbers({name: sn[name][:count]}, name, str(path))
+
+        positions, offsets, strain = rows("positions"), rows("le_offset"), rows("strain")
+        targets = np.stack([rows(name) for name in ("viscosity", "pressure", "z_mu")], axis=1)
         status = str(h5.attrs.get("status", ""))
         if "timeseries/strain" in h5:
             jammed = jammed_snapshots(
@@ -256,10 +254,10 @@ def read_trajectory(path: str | Path) -> Snapshots:
                 )
                 for k in range(min(count, offset.size - 1))
             ]
-    phi, stress = float(params["phi"]), float(params["stress"])
+    phi, stress = _scalar(params, "phi", str(path)), _scalar(params, "stress", str(path))
     check_geometry(str(path), radii, lx, ly, phi)
     check_configurations(str(path), positions, radii, offsets, strain, targets)
-    physical = {k: params[k] for k in PHYSICAL_PARAMS if k in params}
+    physical = {k: _scalar(params, k, f"{path}: params") for k in PHYSICAL_PARAMS if k in params}
     numerics = {k: params[k] for k in ("disp_max", "dt_max", "lagged_step_control") if k in params}
     return Snapshots(
         source=str(path),

@@ -114,14 +114,18 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
             "retrained"
         )
     module_class = _module_class(path, bundle.get("module_class"))
-    module = module_class(**network_hparams(bundle["hparams"], module_class))
-    module.load_state_dict(bundle["state_dict"])
-    module.eval()
-    graph = dict(bundle["graph"])
-    graph["edge_features"] = tuple(graph["edge_features"])
-    graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
-    graph["noise_range"] = tuple(graph.get("noise_range", ()))
-    return module, GraphSettings(**graph), bundle["domain"]
+    try:  # a damaged bundle: entries missing or of the wrong type, weights of another network
+        module = module_class(**network_hparams(bundle["hparams"], module_class))
+        module.load_state_dict(bundle["state_dict"])
+        module.eval()
+        graph = dict(bundle["graph"])
+        graph["edge_features"] = tuple(graph["edge_features"])
+        graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
+        graph["noise_range"] = tuple(graph.get("noise_range", ()))
+        return module, GraphSettings(**graph), dict(bundle["domain"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+        raise InputError(f"{path}: a damaged rheograph model bundle ({type(exc).__name__}: {why})") from exc
 
 
 def trained_noise(domain: dict) -> tuple[float, float]:
