@@ -295,6 +295,8 @@ class TrajectoryFile:
                     f"{self.path}: schema_version {version}, this rheograph writes {SCHEMA_VERSION}"
                 )
             stored = json.loads(h5.attrs["params"])
+            if not isinstance(stored, dict):
+                raise DamagedTrajectoryError(f"{self.path}: its params are not a JSON object; move it away")
             mine = self.params.to_dict()
             differ = params_that_differ(stored, self.params)
             if differ:
