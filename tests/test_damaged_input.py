@@ -146,11 +146,15 @@ def test_an_lfdem_run_cut_in_its_last_row_reads_every_complete_configuration(tmp
         read_snapshots(lfdem_copy(tmp_path, "".join(lines).encode()))
 
 
-def test_a_cut_gzip_lfdem_run_reads_its_complete_configurations_and_a_corrupt_one_is_one_line(tmp_path):
+def test_a_cut_gzip_lfdem_run_reads_its_complete_configurations_and_a_corrupt_one_is_one_line(
+    tmp_path, caplog
+):
     compressed = gzip.compress(PAR.read_bytes(), mtime=0)
     path = lfdem_copy(tmp_path, PAR.read_bytes(), gz=True)
     path.write_bytes(compressed[: len(compressed) // 2])
-    snaps = read_snapshots(path)
+    with caplog.at_level(logging.WARNING, logger="rheograph.io.lfdem"):
+        snaps = read_snapshots(path)
+    assert any(f"{PAR.name}.gz: the gzip file is cut short" in r.getMessage() for r in caplog.records)
     assert 0 < len(snaps) < 7
     np.testing.assert_array_equal(snaps.positions, read_snapshots(PAR).positions[: len(snaps)])
     corrupt = bytearray(compressed)
