@@ -223,6 +223,7 @@ NEGATIVE_RMS = {"eta": [-0.1], "pressure": [0.1], "z_mu": [0.1]}
         ("error_model.json", "", "not a readable error model"),
         ("error_model.json", json.dumps({**ONE_POINT, "rms": {}}), r"not an error model \(rms must hold"),
         ("error_model.json", json.dumps({**ONE_POINT, "rms": NEGATIVE_RMS}), r"not an error .*>= 0"),
+        ("error_model.json", json.dumps({"phi": [0.76], "stress": [0], "rms": {}}), r"not an error .*> 0"),
     ],
 )
 def test_a_damaged_card_or_error_model_is_one_line_naming_it(tmp_path, name, content, message):
