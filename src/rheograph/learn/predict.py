@@ -24,7 +24,8 @@ was trained on), ``notes`` (why not, and any accepted mismatch); per target ``*_
 ``*_pred_err`` (the cross-validated error bar of the model's ``error_model.json``: one RMS of held-out
 residuals, log10 units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time —
 absolute for Z_μ) and ``*_sim`` (the source's own value, NaN where it has none); the physics-only
-values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed stress),
+values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed stress; NaN, with
+the reason in ``notes``, where that solve's shear rate vanishes or runs against the stress),
 ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and ``z_mu_counted`` (the
 CLM's frictional contacts counted); ``jammed_fraction``: the
 share of training trajectories at the nearest trained state point that shear-jammed
