@@ -200,6 +200,26 @@ def test_a_trajectory_with_damaged_contents_is_one_line(tmp_path, change, messag
         read_snapshots(path)
 
 
+def test_train_on_a_trajectory_whose_params_are_not_json_ends_with_one_line(tiny_files, tmp_path):
+    (tmp_path / "data").mkdir()
+    shutil.copy(tiny_files[0], tmp_path / "data" / "t.h5")
+    with h5py.File(tmp_path / "data" / "t.h5", "r+") as h5:
+        h5.attrs["params"] = "not JSON {"
+    line = one_line_error(
+        [
+            str(ROOT / "train.py"),
+            f"data.files={tmp_path / 'data'}/*.h5",
+            "data.phi=null",
+            "data.n_particles=null",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            f"output_root={tmp_path}",
+            "~logger",
+        ],
+        tmp_path,
+    )
+    assert line.startswith("train.py: error: ") and "t.h5: cannot be read" in line
+
+
 def test_flowcurve_names_a_trajectory_whose_time_series_is_damaged(tiny_files, tmp_path):
     from rheograph.flowcurve import collect
 

@@ -226,7 +226,7 @@ def test_a_trajectory_with_wrong_typed_params_reads_valid_or_is_one_line(lfdem_s
             st.text(max_size=20),  # not JSON, or JSON of another kind
             JSON.map(json.dumps),
             with_one_value_replaced(good).map(json.dumps),
-        )
+        ).filter(lambda text: "\x00" not in text)  # HDF5 cannot store it in a string attribute
     )
     path = tmp_path / "t.h5"
     write_trajectory(path, lfdem_snapshots, params)

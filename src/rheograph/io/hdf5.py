@@ -441,7 +441,7 @@ def data_fingerprint(paths) -> str:
             continue
         try:
             info = read_run_info(path)
-        except (OSError, KeyError) as exc:
+        except (OSError, KeyError, ValueError, TypeError) as exc:  # ValueError: params not JSON
             raise TrajectoryFileError(
                 f"{path}: cannot be read ({exc}); if a simulation is still writing it, wait or train on a "
                 "sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun that "

@@ -38,13 +38,16 @@ PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "
 # ratio is read off the radii)
 BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")
 TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
-# what reading a damaged or malformed file raises: a cut or bit-flipped zip (.npz), gzip or HDF5 file, or
-# values of the wrong type or shape
+# what reading a damaged or malformed file raises: a cut or bit-flipped zip (.npz: also a flipped
+# compression method or encryption flag, NotImplementedError / RuntimeError), gzip or HDF5 file (h5py:
+# also RuntimeError), or values of the wrong type or shape
 DAMAGED_FILE_ERRORS = (
     OSError,
     EOFError,
     zipfile.BadZipFile,
     zlib.error,
+    NotImplementedError,
+    RuntimeError,
     ValueError,
     KeyError,
     IndexError,
@@ -124,7 +127,8 @@ def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generat
 
 
 def area_fraction(radii, lx: float, ly: float) -> float:
-    return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
+    with np.errstate(over="ignore"):  # radii of a damaged file: inf, refused by the caller's check
+        return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
 
 
 def check_geometry(where: str, radii, lx, ly, phi) -> None:
@@ -383,6 +387,11 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
             raise InputError(f"{where}: '{key}' needs one value per snapshot ({n_snap}), found {out.size}")
         return out
 
+    strain, targets = series("strain"), np.stack([series(key) for key in TARGET_KEYS], axis=1)
+    if np.isinf(strain).any() or np.isinf(targets).any():
+        raise InputError(
+            f"{where}: the strain or the targets ({', '.join(TARGET_KEYS)}) contain infinite values"
+        )
     noise = _scalar(values, "position_noise", where) if values.get("position_noise") is not None else None
     if noise is not None and noise < 0:
         raise InputError(f"{where}: position_noise = {noise:g} must be >= 0 (units of a)")
@@ -395,11 +404,11 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         lx=lx,
         ly=ly,
         le_offset=offsets,
-        strain=series("strain"),
+        strain=strain,
         stress=stress,
         phi=phi,
         params=params,
-        targets=np.stack([series(key) for key in TARGET_KEYS], axis=1),
+        targets=targets,
         jammed=np.zeros(n_snap, dtype=bool),
         numerics=numerics,
         position_noise=noise,
