@@ -448,7 +448,9 @@ def source_kind(path: str | Path) -> str:
         try:
             with h5py.File(path, "r") as h5:
                 return "rheograph" if "snapshots" in h5 else "bare"
-        except OSError:  # held by a running simulation: only trajectories are written that way
+        # held by a running simulation (only trajectories are written that way), or damaged past its
+        # superblock (HDF5's RuntimeError): the trajectory reader names what is wrong
+        except (OSError, RuntimeError):
             return "rheograph"
     from rheograph.io.hdf5 import last_checkpoint_copy
 
