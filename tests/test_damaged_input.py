@@ -146,6 +146,16 @@ def test_an_lfdem_run_cut_in_its_last_row_reads_every_complete_configuration(tmp
         read_snapshots(lfdem_copy(tmp_path, "".join(lines).encode()))
 
 
+def test_an_lfdem_run_with_a_position_that_is_no_number_is_refused_by_name(tmp_path):
+    lines = PAR.read_text().splitlines(keepends=True)
+    row = next(k for k, line in enumerate(lines) if line.startswith("5 "))
+    words = lines[row].split()
+    words[2] = "nan"  # Python reads it as a number
+    lines[row] = " ".join(words) + "\n"
+    with pytest.raises(InputError, match=rf"{PAR.name}: positions .* not finite numbers"):
+        read_snapshots(lfdem_copy(tmp_path, "".join(lines).encode()))
+
+
 def test_a_cut_gzip_lfdem_run_reads_its_complete_configurations_and_a_corrupt_one_is_one_line(
     tmp_path, caplog
 ):

@@ -369,6 +369,8 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
     gap = np.abs((from_strain - printed + 0.5 * lx) % lx - 0.5 * lx)
     offsets = np.where(gap < 1e-3, from_strain, printed)
     offsets = offsets - lx * np.floor(offsets / lx + 0.5)
+    if not (np.isfinite(offsets).all() and all(np.isfinite(b["positions"]).all() for b in blocks)):
+        raise InputError(f"{where}: positions or shear displacements that are not finite numbers (nan, inf)")
     positions = np.stack([wrap_into_box(b["positions"], lx, ly, o) for b, o in zip(blocks, offsets)])
     shear_rate = np.array([float(b["shear_rate"]) for b in blocks])
     targets = np.full((len(blocks), 3), np.nan)
