@@ -318,3 +318,25 @@ def test_ensemble_spread_of_huge_predictions_stays_finite():
     mean, std = ensemble_mean_std(values)
     np.testing.assert_allclose(mean, [2e200, 2.0])
     np.testing.assert_allclose(std, [1e200, 1.0])
+
+
+def test_a_prediction_that_is_no_finite_number_is_refused_naming_the_snapshot(
+    model_and_snapshot, monkeypatch
+):
+    """Inputs far enough outside a model's training can make its output overflow (a float32 network read
+    out through sinh): never written, refused with the snapshot and why its inputs lie outside."""
+    import rheograph.learn.predict as predict_module
+
+    real = predict_module.predict_dataset
+
+    def overflowing(module, graphs, batch_size):
+        pred, true, meta = real(module, graphs, batch_size)
+        pred[0, 0] = np.inf
+        return pred, true, meta
+
+    monkeypatch.setattr(predict_module, "predict_dataset", overflowing)
+    _, snaps, k = model_and_snapshot
+    with pytest.raises(
+        InputError, match=r"snapshot\(s\) \[0\] is not a finite number.*\(snapshot 0: edge features"
+    ):
+        predict(model_and_snapshot, snaps.positions[k] * 0.9)
