@@ -123,7 +123,11 @@ def load_bundle(path: str | Path) -> tuple[SurrogateModule, GraphSettings, dict]
         graph["edge_features"] = tuple(graph["edge_features"])
         graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
         graph["noise_range"] = tuple(graph.get("noise_range", ()))
-        return module, GraphSettings(**graph), dict(bundle["domain"])
+        domain = dict(bundle["domain"])
+        missing = {"phi", "stress", "n_particles", "size_ratio", "edge_min", "edge_max"} - set(domain)
+        if missing:
+            raise KeyError(f"its training domain lacks {sorted(missing)}")
+        return module, GraphSettings(**graph), domain
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
         raise InputError(f"{path}: a damaged rheograph model bundle ({type(exc).__name__}: {why})") from exc
