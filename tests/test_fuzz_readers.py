@@ -2,9 +2,10 @@
 (.h5), LF_DEM runs (par_*.dat, .dat.gz) and model folders (card.json, error_model.json, fold*.pt) — given
 a truncated, bit-flipped or wrong-typed copy of a small valid file either returns valid data (finite
 numbers of the right shapes) or raises ``InputError`` with one line naming the file; never another
-exception, a hang or a non-finite number.
+exception, a non-finite number or a read that crawls (each example has a 20 s deadline; reads take
+milliseconds, the first one of a test also imports torch).
 
-Bounded for the default suite (all of them together take ~20 s on one core) and reproducible
+Bounded for the default suite (all of them together take about 12 s of CPU) and reproducible
 (``derandomize``: the same examples on every run).  A longer, randomised search:
 ``HYPOTHESIS_PROFILE=long pytest tests/test_fuzz_readers.py`` (50x the examples, new ones each run).
 """
@@ -16,6 +17,7 @@ import math
 import os
 import shutil
 import warnings
+from datetime import timedelta
 from pathlib import Path
 
 import h5py
@@ -33,7 +35,7 @@ PAR = LFDEM / "par_conf_params_stress10cl_shear.dat"
 MODEL = ROOT / "src" / "rheograph" / "models" / "N400_phi0.76"
 
 _COMMON = dict(
-    deadline=None,  # a first read imports h5py / numba-compiled code: timing is not the property
+    deadline=timedelta(seconds=20),
     database=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
