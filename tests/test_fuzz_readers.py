@@ -339,7 +339,8 @@ def test_a_damaged_model_card_reads_valid_or_is_one_line(tmp_path, data):
     )
     card = assert_valid_or_one_line(lambda p: read_card([p.with_name("fold0.pt")]), tmp_path / "card.json")
     if card is not None:
-        domain, noise = card["domain"], np.atleast_1d(card["position_noise"])
+        domain, noise = card["domain"], card["position_noise"]
+        noise = noise if isinstance(noise, list) else [noise]
         for values in (domain["phi"], domain["stress"], domain["n_particles"], noise):
             assert all(isinstance(v, int | float) and math.isfinite(v) for v in values)
         assert len(domain["phi"]) == len(domain["stress"]) == 2
