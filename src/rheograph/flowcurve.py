@@ -23,6 +23,7 @@ import numpy as np
 from rheograph.analysis import read_lfdem_data, steady_state_summary
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.hdf5 import PRODUCER, read_run_info, read_timeseries
+from rheograph.io.snapshots import DAMAGED_FILE_ERRORS
 from rheograph.sim.params import scheme_name
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")
@@ -49,32 +50,39 @@ def collect(directories) -> list[dict]:
         for path in sorted(Path(directory).rglob("*.h5")):
             if not _is_trajectory(path):
                 continue
-            info = read_run_info(path)
-            p = info["params"]
-            # recompute from the time series (the estimator may be newer than the file's summary)
-            ts = read_timeseries(path)
-            info["summary"] = steady_state_summary(
-                ts["strain"],
-                ts["time"],
-                ts["pressure"],
-                ts["z_mu"],
-                ts["z"],
-                p["stress"],
-                p["steady_state_strain"],
-            )
-            # the slowest flow recorded in the steady window (one row every output interval): how close a
-            # flowing run came to arresting
-            rate = ts.get("shear_rate")
-            window = ts["strain"] >= p["steady_state_strain"]
-            info["slowest_rate"] = (
-                float(rate[window].min()) if rate is not None and window.any() else float("nan")
-            )
-            # LF_DEM's lagged step control is another discretisation: never pooled with the default
-            scheme = scheme_name(p["integrator"], p.get("lagged_step_control", False))
-            key = (p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme)
-            same_start = groups[key].get(p["seed"])
+            try:
+                info = read_run_info(path)
+                p = info["params"]
+                # recompute from the time series (the estimator may be newer than the file's summary)
+                ts = read_timeseries(path)
+                info["summary"] = steady_state_summary(
+                    ts["strain"],
+                    ts["time"],
+                    ts["pressure"],
+                    ts["z_mu"],
+                    ts["z"],
+                    p["stress"],
+                    p["steady_state_strain"],
+                )
+                # the slowest flow recorded in the steady window (one row every output interval): how close a
+                # flowing run came to arresting
+                rate = ts.get("shear_rate")
+                window = ts["strain"] >= p["steady_state_strain"]
+                info["slowest_rate"] = (
+                    float(rate[window].min()) if rate is not None and window.any() else float("nan")
+                )
+                # LF_DEM's lagged step control is another discretisation: never pooled with the default
+                scheme = scheme_name(p["integrator"], p.get("lagged_step_control", False))
+                key = (p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme)
+                seed = p["seed"]
+            except DAMAGED_FILE_ERRORS as exc:  # the file, its parameters or its time series damaged
+                raise InputError(
+                    f"{path}: cannot be read as a rheograph trajectory ({type(exc).__name__}: {exc}); if "
+                    "it is damaged, move it aside and rerun that state point"
+                ) from exc
+            same_start = groups[key].get(seed)
             if same_start is None or info["strain"] > same_start["strain"]:
-                groups[key][p["seed"]] = info
+                groups[key][seed] = info
     points = []
     for (n, phi, stress, mu, disp, integrator), by_seed in sorted(groups.items()):
         infos = list(by_seed.values())

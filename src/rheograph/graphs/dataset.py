@@ -27,6 +27,7 @@ from rheograph.graphs.features import (
     SHELL_INPUTS,
     SHELL_WIDTHS,
     STRESS_EDGE_FEATURES,
+    check_separations,
     forward_transform,
     node_features,
     relax_positions,
@@ -302,6 +303,10 @@ def snapshot_graphs(
     solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
     # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
+    for idx in keep:
+        check_separations(
+            f"{path}, snapshot {idx}", snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx]
+        )
     if settings.relax_strain and "disp_max" not in solve_params:
         raise InputError(
             f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "

@@ -341,6 +341,8 @@ class TrajectoryFile:
                     f"{self.path}: schema_version {version}, this rheograph writes {SCHEMA_VERSION}"
                 )
             stored = json.loads(h5.attrs["params"])
+            if not isinstance(stored, dict):
+                raise DamagedTrajectoryError(f"{self.path}: its params are not a JSON object; move it away")
             mine = self.params.to_dict()
             differ = params_that_differ(stored, self.params)
             if differ:
@@ -485,7 +487,7 @@ def data_fingerprint(paths) -> str:
             continue
         try:
             info = read_run_info(path)
-        except (OSError, KeyError) as exc:
+        except (OSError, KeyError, ValueError, TypeError) as exc:  # ValueError: params not JSON
             raise TrajectoryFileError(
                 f"{path}: cannot be read ({exc}); if a simulation is still writing it, wait or train on a "
                 "sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun that "

@@ -17,6 +17,7 @@ import h5py
 
 from rheograph.errors import InputError
 from rheograph.io.hdf5 import PRODUCER, read_run_info
+from rheograph.io.snapshots import DAMAGED_FILE_ERRORS
 
 USABLE = ("completed", "jammed")
 
@@ -33,7 +34,7 @@ def build_index(directories) -> dict:
                         raise ValueError("not a rheograph trajectory")
                     n_snapshots = int(h5["snapshots/time"].shape[0])
                 info = read_run_info(path)
-            except (OSError, ValueError, KeyError) as exc:
+            except DAMAGED_FILE_ERRORS as exc:  # foreign, locked by a running simulation, or damaged
                 skipped.append({"path": str(path), "reason": str(exc)})
                 continue
             entries.append(

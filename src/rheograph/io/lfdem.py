@@ -25,8 +25,10 @@ What is read, and from where (docs/data_format.md, "LF_DEM runs"):
 from __future__ import annotations
 
 import gzip
+import logging
 import math
 import re
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +51,8 @@ LFDEM_DEFAULTS = {
 }
 SNAPSHOT_KEYS = {"cumulated strain": "strain", "shear disp": "shear_disp", "shear rate": "shear_rate"}
 FRICTIONAL_STATES = (2, 3)  # int_*.dat contact state: 2 non-sliding frictional, 3 sliding frictional
+
+log = logging.getLogger(__name__)
 
 
 def _open_text(path: Path):
@@ -81,24 +85,66 @@ def _file_header(lines, where) -> dict:
     return header
 
 
+def _par_text(path: Path) -> str:
+    """The text of a par file; of a gzip file cut short, what its compressed stream holds up to the cut
+    (with a warning: a copy of a finished run cut short, its unfinished configuration then left out by
+    ``read_par``).  A corrupt gzip stream (a check sum that fails) is refused by name."""
+    if not path.name.endswith(".gz"):
+        return path.read_text()
+    data, parts = path.read_bytes(), []
+    while data:
+        stream = zlib.decompressobj(wbits=31)  # one gzip member
+        try:
+            parts.append(stream.decompress(data))
+        except zlib.error as exc:
+            raise InputError(f"{path}: a corrupt gzip file ({exc}); is it damaged?") from exc
+        if not stream.eof:
+            log.warning("%s: the gzip file is cut short: configurations read up to the cut", path)
+            break
+        data = stream.unused_data
+    try:
+        return b"".join(parts).decode()
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not an LF_DEM text file ({exc})") from exc
+
+
 def read_par(path: Path) -> tuple[dict, list[dict]]:
     """(file header, snapshots): each snapshot a dict of its header values and ``radii`` (N,),
-    ``positions`` (N, 2) in the x–z plane."""
-    with _open_text(path) as fh:
-        lines = fh.read().splitlines()
+    ``positions`` (N, 2) in the x–z plane.
+
+    The last configuration is left out, with a warning, where it is unfinished: fewer particle rows than
+    the header's np, or a last line without its line end (a run still writing, or a copy cut short — a
+    cut line may still hold five numbers, one of them cut).  Any other configuration that is not np rows
+    of numbers is refused by name."""
+    text = _par_text(path)
+    lines = text.splitlines()
     header = _file_header(lines, path)
-    n = int(header["np"])
+    try:
+        n = int(header["np"])
+    except ValueError as exc:
+        raise InputError(f"{path}: '# np {header['np']}' is not a particle count") from exc
+    cut_line = bool(text) and not text.endswith("\n")
+    if cut_line:
+        lines = lines[:-1]
     snapshots, current, rows = [], None, []
 
     def close():
         if current is None:
             return
+        where = f"{path}: the configuration at strain {current.get('strain')}"
         if len(rows) != n:
             raise InputError(
-                f"{path}: a configuration at strain {current.get('strain')} has {len(rows)} particle rows, "
-                f"the header says np = {n} (a run still writing, or a truncated file)"
+                f"{where} has {len(rows)} particle rows, the header says np = {n}: the file is damaged"
             )
-        table = np.array(rows, dtype=np.float64)
+        try:
+            if min(len(row) for row in rows) < 5:
+                raise ValueError("a row has fewer than 5 columns")
+            table = np.array(rows, dtype=np.float64)
+        except ValueError as exc:
+            raise InputError(
+                f"{where} cannot be read as an LF_DEM run: its particle rows are not 5 or more numbers each "
+                f"({exc})"
+            ) from exc
         current["radii"] = table[:, 1]
         current["positions"] = table[:, [2, 4]]
         snapshots.append(current)
@@ -114,11 +160,19 @@ def read_par(path: Path) -> tuple[dict, list[dict]]:
                 current[SNAPSHOT_KEYS.get(key, key)] = value.strip()
         elif line.strip() and not line.startswith("#") and current is not None:
             rows.append(line.split()[:5])
-    if current is not None and len(rows) < n:  # the last block of a run still writing
+    if current is not None and len(rows) < n:
+        log.warning(
+            "%s: its last configuration (strain %s) is unfinished (%d of %d particle rows whole: a run "
+            "still writing, or a copy cut short): left out",
+            path,
+            current.get("strain"),
+            len(rows),
+            n,
+        )
         current = None
     close()
     if not snapshots:
-        raise InputError(f"{path}: no configuration in this LF_DEM par file")
+        raise InputError(f"{path}: no complete configuration in this LF_DEM par file")
     return header, snapshots
 
 
@@ -315,6 +369,8 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
     gap = np.abs((from_strain - printed + 0.5 * lx) % lx - 0.5 * lx)
     offsets = np.where(gap < 1e-3, from_strain, printed)
     offsets = offsets - lx * np.floor(offsets / lx + 0.5)
+    if not (np.isfinite(offsets).all() and all(np.isfinite(b["positions"]).all() for b in blocks)):
+        raise InputError(f"{where}: positions or shear displacements that are not finite numbers (nan, inf)")
     positions = np.stack([wrap_into_box(b["positions"], lx, ly, o) for b, o in zip(blocks, offsets)])
     shear_rate = np.array([float(b["shear_rate"]) for b in blocks])
     targets = np.full((len(blocks), 3), np.nan)

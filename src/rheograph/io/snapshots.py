@@ -24,6 +24,8 @@ import difflib
 import json
 import logging
 import math
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,6 +48,21 @@ BARE_KEYS = (
     "positions", "radii", "box", "le_offset", "stress", "phi", *PHYSICAL_PARAMS, "strain", *TARGET_KEYS,
     "position_noise", "disp_max", "dt_max", "lagged_step_control",
 )  # fmt: skip
+# what reading a damaged or malformed file raises: a cut or bit-flipped zip (.npz: also a flipped
+# compression method or encryption flag, NotImplementedError / RuntimeError), gzip or HDF5 file (h5py:
+# also RuntimeError), or values of the wrong type or shape
+DAMAGED_FILE_ERRORS = (
+    OSError,
+    EOFError,
+    zipfile.BadZipFile,
+    zlib.error,
+    NotImplementedError,
+    RuntimeError,
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+)
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
 
@@ -120,7 +137,8 @@ def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generat
 
 
 def area_fraction(radii, lx: float, ly: float) -> float:
-    return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
+    with np.errstate(over="ignore"):  # radii of a damaged file: inf, refused by the caller's check
+        return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
 
 
 def check_geometry(where: str, radii, lx, ly, phi) -> None:
@@ -142,6 +160,24 @@ def check_geometry(where: str, radii, lx, ly, phi) -> None:
             f"{where}: phi = {phi:g} but the radii and box give an area fraction {measured:.6g}: check the "
             "box (Lx, Ly) and the radii's units"
         )
+
+
+def check_configurations(where: str, positions, radii, le_offset, strain, targets) -> None:
+    """Positions (S, N, 2) [a] and offsets (S,) [a] finite, with N the radii's; strain (S,) and targets
+    (S, 3) finite or NaN (unknown), never infinite: what a damaged file gives otherwise."""
+    n_snap = len(positions)
+    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
+        raise InputError(
+            f"{where}: positions must be (S, N, 2) with N = {radii.size} (the radii), found {positions.shape}"
+        )
+    if not np.all(np.isfinite(positions)):
+        raise InputError(f"{where}: positions contain non-finite values")
+    if le_offset.shape != (n_snap,) or not np.all(np.isfinite(le_offset)):
+        raise InputError(f"{where}: le_offset must be ({n_snap},) finite numbers, one per snapshot")
+    if strain.shape != (n_snap,) or targets.shape != (n_snap, 3):
+        raise InputError(f"{where}: the strain and the targets need one value per snapshot ({n_snap})")
+    if np.isinf(strain).any() or np.isinf(targets).any():
+        raise InputError(f"{where}: the strain or the targets contain infinite values")
 
 
 def _size_ratio(radii) -> float:
@@ -180,8 +216,10 @@ def read_trajectory(path: str | Path) -> Snapshots:
                 raise InputError(f"{path}: no /{key}: not a trajectory (docs/data_format.md)")
         try:
             params = json.loads(h5.attrs["params"])
-        except (KeyError, ValueError) as exc:
+        except (KeyError, ValueError, TypeError) as exc:
             raise InputError(f"{path}: no readable root attribute 'params' (JSON of the sim.* keys)") from exc
+        if not isinstance(params, dict):
+            raise InputError(f"{path}: its root attribute 'params' is not a JSON object of the sim.* keys")
         for key in ("stress", "phi"):
             if key not in params:
                 raise InputError(f"{path}: its params lack '{key}' (the state point): add it to the file")
@@ -189,23 +227,21 @@ def read_trajectory(path: str | Path) -> Snapshots:
             if key not in h5.attrs:
                 raise InputError(f"{path}: no root attribute '{key}' (box length [a])")
         lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
-        radii = h5["radii"][()].astype(np.float64)
+        radii = _numbers({"radii": h5["radii"][()]}, "radii", str(path))
         sn = h5["snapshots"]
         count = sn["positions"].shape[0]
         if opened != path or str(h5.attrs.get("status", "")) == "running":
             # rows a running file appended after its last checkpoint may be half written
             counters = json.loads(h5["checkpoint"].attrs["counters"]) if "checkpoint" in h5 else {}
             count = min(count, int(counters.get("snapshots", count)))
-        positions = sn["positions"][:count].astype(np.float64)
-        offsets = sn["le_offset"][:count].astype(np.float64)
-        strain = sn["strain"][:count] if "strain" in sn else np.full(count, np.nan)
-        targets = np.stack(
-            [
-                sn[name][:count] if name in sn else np.full(count, np.nan)
-                for name in ("viscosity", "pressure", "z_mu")
-            ],
-            axis=1,
-        ).astype(np.float64)
+
+        def rows(name):  # the first count rows of a dataset of /snapshots, as numbers
+            if name not in sn:
+                return np.full(count, np.nan)
+            return _numbers({name: sn[name][:count]}, name, str(path))
+
+        positions, offsets, strain = rows("positions"), rows("le_offset"), rows("strain")
+        targets = np.stack([rows(name) for name in ("viscosity", "pressure", "z_mu")], axis=1)
         status = str(h5.attrs.get("status", ""))
         if "timeseries/strain" in h5:
             jammed = jammed_snapshots(
@@ -232,9 +268,10 @@ def read_trajectory(path: str | Path) -> Snapshots:
                 )
                 for k in range(min(count, offset.size - 1))
             ]
-    phi, stress = float(params["phi"]), float(params["stress"])
+    phi, stress = _scalar(params, "phi", str(path)), _scalar(params, "stress", str(path))
     check_geometry(str(path), radii, lx, ly, phi)
-    physical = {k: params[k] for k in PHYSICAL_PARAMS if k in params}
+    check_configurations(str(path), positions, radii, offsets, strain, targets)
+    physical = {k: _scalar(params, k, f"{path}: params") for k in PHYSICAL_PARAMS if k in params}
     numerics = {k: params[k] for k in ("disp_max", "dt_max", "lagged_step_control") if k in params}
     return Snapshots(
         source=str(path),
@@ -270,11 +307,23 @@ def _bare_values(path: Path) -> dict:
         return values
 
 
-def _scalar(values: dict, key: str, where: str) -> float:
+def _numbers(values: dict, key: str, where: str) -> np.ndarray:
+    """``values[key]`` as float64 numbers; a complex, text or other non-numeric value is refused by name
+    (numpy would drop an imaginary part with only a warning)."""
+    value = values[key]
+    if np.iscomplexobj(value):
+        raise InputError(f"{where}: '{key}' must be real numbers, found complex ones")
     try:
-        value = float(np.asarray(values[key], dtype=np.float64).reshape(()))
+        return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{where}: '{key}' must be one number") from exc
+        raise InputError(f"{where}: '{key}' must be numbers, found {np.asarray(value).dtype}") from exc
+
+
+def _scalar(values: dict, key: str, where: str) -> float:
+    numbers = _numbers(values, key, where)
+    if numbers.size != 1:
+        raise InputError(f"{where}: '{key}' must be one number, found {numbers.size}")
+    value = float(numbers.reshape(()))
     if not math.isfinite(value):
         raise InputError(f"{where}: '{key}' = {value} is not finite")
     return value
@@ -324,10 +373,10 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
                 else ""
             )
         )
-    positions = np.asarray(values["positions"], dtype=np.float64)
+    positions = _numbers(values, "positions", where)
     if positions.ndim == 2:
         positions = positions[None]
-    radii = np.asarray(values["radii"], dtype=np.float64).reshape(-1)
+    radii = _numbers(values, "radii", where).reshape(-1)
     if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
         raise InputError(
             f"{where}: positions must be (S, N, 2) or (N, 2) with N = {radii.size} (the radii), "
@@ -336,11 +385,11 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     if not np.all(np.isfinite(positions)):
         raise InputError(f"{where}: positions contain non-finite values")
     n_snap = positions.shape[0]
-    box = np.asarray(values["box"], dtype=np.float64).reshape(-1)
+    box = _numbers(values, "box", where).reshape(-1)
     if box.size != 2:
         raise InputError(f"{where}: box must be (Lx, Ly), found {box.size} value(s)")
     lx, ly = float(box[0]), float(box[1])
-    offsets = np.asarray(values["le_offset"], dtype=np.float64).reshape(-1)
+    offsets = _numbers(values, "le_offset", where).reshape(-1)
     if offsets.size == 1:
         offsets = np.full(n_snap, offsets[0])
     if offsets.size != n_snap or not np.all(np.isfinite(offsets)):
@@ -363,11 +412,16 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     def series(key):
         if key not in values:
             return np.full(n_snap, np.nan)
-        out = np.asarray(values[key], dtype=np.float64).reshape(-1)
+        out = _numbers(values, key, where).reshape(-1)
         if out.size != n_snap:
             raise InputError(f"{where}: '{key}' needs one value per snapshot ({n_snap}), found {out.size}")
         return out
 
+    strain, targets = series("strain"), np.stack([series(key) for key in TARGET_KEYS], axis=1)
+    if np.isinf(strain).any() or np.isinf(targets).any():
+        raise InputError(
+            f"{where}: the strain or the targets ({', '.join(TARGET_KEYS)}) contain infinite values"
+        )
     noise = _scalar(values, "position_noise", where) if values.get("position_noise") is not None else None
     if noise is not None and noise < 0:
         raise InputError(f"{where}: position_noise = {noise:g} must be >= 0 (units of a)")
@@ -380,11 +434,11 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         lx=lx,
         ly=ly,
         le_offset=offsets,
-        strain=series("strain"),
+        strain=strain,
         stress=stress,
         phi=phi,
         params=params,
-        targets=np.stack([series(key) for key in TARGET_KEYS], axis=1),
+        targets=targets,
         jammed=np.zeros(n_snap, dtype=bool),
         numerics=numerics,
         position_noise=noise,
@@ -424,7 +478,9 @@ def source_kind(path: str | Path) -> str:
         try:
             with h5py.File(path, "r") as h5:
                 return "rheograph" if "snapshots" in h5 else "bare"
-        except OSError:  # held by a running simulation: only trajectories are written that way
+        # held by a running simulation (only trajectories are written that way), or damaged past its
+        # superblock (HDF5's RuntimeError): the trajectory reader names what is wrong
+        except (OSError, RuntimeError):
             return "rheograph"
     from rheograph.io.hdf5 import last_checkpoint_copy
 
@@ -463,7 +519,7 @@ def _read_source(path: str | Path, lfdem_params: str | Path | None, params: dict
         return read_trajectory(path) if kind == "rheograph" else read_bare(path, params)
     except InputError:
         raise
-    except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:  # damaged or malformed content
+    except DAMAGED_FILE_ERRORS as exc:
         raise InputError(
             f"{path}: cannot be read as {KIND_NAMES[kind]} ({type(exc).__name__}: {exc}); is it truncated "
             "or of another format?"

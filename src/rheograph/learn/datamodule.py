@@ -345,8 +345,8 @@ def source_summary(path: str, lfdem_params=None) -> dict:
                 "params": {k: stored[k] for k in PHYSICAL_PARAMS if k in stored},
                 "numerics": {k: stored[k] for k in SOLVE_NUMERICS if k in stored},
             }
-        except (OSError, KeyError, ValueError):
-            pass  # held by a running simulation, or without the root params: the reader says what
+        except (OSError, KeyError, ValueError, TypeError):
+            pass  # held by a running simulation, or without readable root params: the reader says what
     snaps = read_snapshots(path, lfdem_params)
     return {
         "phi": snaps.phi,

@@ -15,10 +15,12 @@ Shapes: ``pred``, ``true`` (G, 3) physical [η_r, Π, Z_μ]; ``stress``, ``phi``
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 
+from rheograph.errors import InputError
 from rheograph.learn.module import LOG_TARGETS, TARGET_NAMES
 
 FILENAME = "error_model.json"
@@ -93,4 +95,41 @@ def read_error_model(run_dir: Path) -> dict | None:
     """The error model of a training run directory, or None (a run trained before it existed, or on a
     random split, whose test snapshots share trajectories with training and would give optimistic bars)."""
     path = Path(run_dir) / FILENAME
-    return json.loads(path.read_text()) if path.exists() else None
+    if not path.exists():
+        return None
+    try:
+        model = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not a readable error model ({exc}); is the model folder damaged?") from exc
+    problem = _error_model_problem(model)
+    if problem:
+        raise InputError(f"{path}: not an error model ({problem}); is the model folder damaged?")
+    return model
+
+
+def _error_model_problem(model) -> str:
+    """What makes ``model`` (read from JSON) no error model of ``fit_error_model``'s form; '' if nothing."""
+    if not isinstance(model, dict):
+        return "not a JSON object"
+
+    def numbers(value, allow_none=False):
+        return isinstance(value, list) and all(
+            (v is None and allow_none)
+            or (isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v))
+            for v in value
+        )
+
+    phi, stress, rms = model.get("phi"), model.get("stress"), model.get("rms")
+    if not (numbers(phi) and numbers(stress) and phi and len(phi) == len(stress)):
+        return "phi and stress must be lists of as many numbers, at least one"
+    if min(stress) <= 0:
+        return "stress must be > 0"
+    if not isinstance(rms, dict) or set(TARGET_NAMES) - set(rms):
+        return f"rms must hold a list for each of {list(TARGET_NAMES)}"
+    for name in TARGET_NAMES:
+        values = rms[name]
+        if not (numbers(values, allow_none=True) and len(values) == len(phi)):
+            return f"rms.{name} must be one number or null per state point ({len(phi)})"
+        if any(v is not None and v < 0 for v in values):
+            return f"rms.{name} must be >= 0 (a root-mean-square)"
+    return ""

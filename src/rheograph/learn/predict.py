@@ -28,7 +28,8 @@ was trained on), ``notes`` (why not, and any accepted mismatch); per target ``*_
 ``*_pred_err`` (the cross-validated error bar of the model's ``error_model.json``: one RMS of held-out
 residuals, log10 units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time —
 absolute for Z_μ) and ``*_sim`` (the source's own value, NaN where it has none); the physics-only
-values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed stress),
+values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed stress; NaN, with
+the reason in ``notes``, where that solve's shear rate vanishes or runs against the stress),
 ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and ``z_mu_counted`` (the
 CLM's frictional contacts counted); ``jammed_fraction``: the
 share of training trajectories at the nearest trained state point that shear-jammed
@@ -109,10 +110,19 @@ def load_bundle(
     ``network_class``: one registered for this call)."""
     bundle = read_bundle(path)
     module_class = registered_network(bundle.get("module_class"), path, network_class)
-    module = module_class(**network_hparams(bundle["hparams"], module_class))
-    module.load_state_dict(bundle["state_dict"])
-    module.eval()
-    return module, bundle_graph_settings(bundle), bundle["domain"]
+    try:  # a damaged bundle: entries missing or of the wrong type, weights of another network
+        module = module_class(**network_hparams(bundle["hparams"], module_class))
+        module.load_state_dict(bundle["state_dict"])
+        module.eval()
+        settings = bundle_graph_settings(bundle)
+        domain = dict(bundle["domain"])
+        missing = {"phi", "stress", "n_particles", "size_ratio", "edge_min", "edge_max"} - set(domain)
+        if missing:
+            raise KeyError(f"its training domain lacks {sorted(missing)}")
+        return module, settings, domain
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+        raise InputError(f"{path}: a damaged rheograph model bundle ({type(exc).__name__}: {why})") from exc
 
 
 def trained_noise(domain: dict) -> tuple[float, float]:
@@ -265,6 +275,20 @@ def resolve_device(device: str | torch.device, where: str = "device") -> torch.d
         raise InputError(f"{where}={name!r} is not a torch device name") from exc
 
 
+def ensemble_mean_std(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation over axis 0 (the fold models) of finite ``values`` (models, S); for
+    values so large that the sum of squares overflows, computed in units of their largest magnitude
+    (finite then too)."""
+    with np.errstate(over="ignore"):
+        mean, std = values.mean(axis=0), values.std(axis=0)
+    overflow = ~(np.isfinite(mean) & np.isfinite(std))
+    if overflow.any():
+        scale = np.abs(values[:, overflow]).max(axis=0)
+        unit = values[:, overflow] / scale
+        mean[overflow], std[overflow] = unit.mean(axis=0) * scale, unit.std(axis=0) * scale
+    return mean, std
+
+
 class Surrogate:
     """An ensemble of fold models with what they were trained on (``domain``) and, for a shipped model,
     its card; ``load_model`` makes one. ``device``: where the networks run (``resolve_device``);
@@ -378,6 +402,7 @@ class Surrogate:
             pred, true, meta = predict_dataset(module, graphs, batch_size=per_pass, device=self.device)
             preds.append(pred)
         preds = np.stack(preds)  # (models, S, 3)
+        overflow = np.flatnonzero(~np.isfinite(preds).all(axis=(0, 2)))
         extra = {}
         if positions_only:
             per_stress = preds[:, :, 1].copy()
@@ -387,6 +412,26 @@ class Surrogate:
             preds[:, :, 1] = per_stress * snaps.stress  # NaN where sigma is unknown
             meta["stress"] = np.full(len(graphs), snaps.stress)
         in_domain, row_reasons = domain_report(self.domain, snaps, graphs, self.settings, self.min_strain)
+        if overflow.size:
+            k = overflow[0]
+            raise InputError(
+                f"{snaps.source}: model {self.label}'s prediction for snapshot(s) {overflow[:5].tolist()} is "
+                f"not a finite number, their inputs lie that far outside its training (snapshot {k}: "
+                f"{'; '.join(row_reasons[k]) or 'no reason found'}); are the positions in units of the small "
+                "radius a?"
+            )
+        # physics only, nothing learned: the one-solve eta_r, the contact-spring pressure, the counted Z_mu
+        physics = np.concatenate([g.physics.numpy() for g in graphs]).astype(np.float64)
+        # a solve whose shear rate vanishes or runs against the stress has no viscosity to report (a
+        # configuration no flowing suspension takes: overlaps far beyond the simulator's); NaN: not solved
+        no_viscosity = (physics[:, 0] <= 0) | np.isinf(physics[:, 0])
+        for k in np.flatnonzero(no_viscosity):
+            row_reasons[k].append(
+                f"the one-solve gives eta_r = {physics[k, 0]:.3g}, not a viscosity (its shear rate vanishes "
+                "or runs against the stress): eta_solve left empty"
+            )
+        physics[no_viscosity, 0] = np.nan
+        in_domain &= ~no_viscosity
         row_reasons = [notes + r for r in row_reasons]
         in_domain &= not notes
         if not in_domain.all():
@@ -411,8 +456,6 @@ class Surrogate:
         out.update(extra)
         if "jam_map" in self.domain and not positions_only:
             out["jammed_fraction"] = jammed_fraction(self.domain["jam_map"], meta["phi"], meta["stress"])
-        # physics only, nothing learned: the one-solve eta_r, the contact-spring pressure, the counted Z_mu
-        physics = np.concatenate([g.physics.numpy() for g in graphs])
         out.update(eta_solve=physics[:, 0], pressure_spring=physics[:, 1], z_mu_counted=physics[:, 2])
         errors = (
             predicted_error(self.error_model, meta["stress"], meta["phi"])
@@ -420,8 +463,7 @@ class Surrogate:
             else None
         )
         for k, name in enumerate(TARGET_NAMES):
-            out[f"{name}_pred"] = preds[:, :, k].mean(axis=0)
-            out[f"{name}_pred_std"] = preds[:, :, k].std(axis=0)
+            out[f"{name}_pred"], out[f"{name}_pred_std"] = ensemble_mean_std(preds[:, :, k])
             if errors is not None:
                 out[f"{name}_pred_err"] = errors[:, k]
             out[f"{name}_sim"] = true[:, k]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -56,9 +57,40 @@ def model_paths(name_or_path: str | Path) -> tuple[list[Path], str]:
     )
 
 
+def _finite_numbers(value, count: int | None = None) -> bool:
+    """Whether ``value`` is a list of ``count`` (any number if None, at least one) finite numbers."""
+    return (
+        isinstance(value, list)
+        and (len(value) == count if count is not None else bool(value))
+        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    )
+
+
 def read_card(paths: list[Path]) -> dict | None:
-    card = paths[0].parent / "card.json"
-    return json.loads(card.read_text()) if card.is_file() else None
+    """The ``card.json`` beside the bundles ``paths``, or None where there is none; one that is not JSON
+    or lacks what predictions read of it (its ``domain``: ``phi`` and ``stress`` ranges, ``n_particles``;
+    ``position_noise``) is refused by name."""
+    path = paths[0].parent / "card.json"
+    if not path.is_file():
+        return None
+    try:
+        card = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not a readable model card ({exc}); is the model folder damaged?") from exc
+    domain = card.get("domain") if isinstance(card, dict) else None
+    noise = card.get("position_noise") if isinstance(card, dict) else None
+    if not (
+        isinstance(domain, dict)
+        and _finite_numbers(domain.get("phi"), 2)
+        and _finite_numbers(domain.get("stress"), 2)
+        and _finite_numbers(domain.get("n_particles"))
+        and (_finite_numbers([noise]) or _finite_numbers(noise, 2))
+    ):
+        raise InputError(
+            f"{path}: not a model card: it needs domain.phi and domain.stress (two numbers each), "
+            "domain.n_particles (a list) and position_noise (a number or two); is the model folder damaged?"
+        )
+    return card
 
 
 # ---- making a shipped model ----------------------------------------------------------------------
