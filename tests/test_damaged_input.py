@@ -329,8 +329,8 @@ def test_a_prediction_that_is_no_finite_number_is_refused_naming_the_snapshot(
 
     real = predict_module.predict_dataset
 
-    def overflowing(module, graphs, batch_size):
-        pred, true, meta = real(module, graphs, batch_size)
+    def overflowing(module, graphs, batch_size, device=None):
+        pred, true, meta = real(module, graphs, batch_size, device=device)
         pred[0, 0] = np.inf
         return pred, true, meta
 

@@ -63,22 +63,37 @@ def checked_simulate_config(cfg: DictConfig):
     return params
 
 
+# The Hydra entry points whose settings are checked before their run directory exists
+RUN_SETTINGS_CHECKED = ("simulate", "tune")
+
+
+def _settings_check(entry_point: str):
+    """The function of the composed config that raises ``InputError`` for ``entry_point``'s rejected
+    settings; chosen from fixed code, so that no configuration names code to import."""
+    if entry_point == "tune":
+        from rheograph.learn.tune import check_tune_settings  # lazily: optuna only for tune.py
+
+        return check_tune_settings
+    return checked_simulate_config
+
+
 class CheckBeforeRunDirectory(Callback):
     """Checks a single run's settings before Hydra creates its run directory (``on_run_start``), so that
-    a rejected run leaves no directory behind: ``check`` is the dotted name of a function of the composed
-    config that raises ``InputError``, which ``rheograph.errors.run_hydra_app`` prints as one line."""
+    a rejected run leaves no directory behind: ``entry_point`` is one of ``RUN_SETTINGS_CHECKED``; the
+    check's ``InputError`` is printed by ``rheograph.errors.run_hydra_app`` as one line."""
 
-    def __init__(self, check: str):
-        self.check = check
+    def __init__(self, entry_point: str):
+        if entry_point not in RUN_SETTINGS_CHECKED:
+            raise ValueError(
+                f"CheckBeforeRunDirectory: entry_point {entry_point!r} is none of {RUN_SETTINGS_CHECKED}"
+            )
+        self.entry_point = entry_point
 
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
-        import importlib
-
         from rheograph.errors import InputError, RefusedBeforeRun
 
-        module, _, name = self.check.rpartition(".")
         try:
-            getattr(importlib.import_module(module), name)(config)
+            _settings_check(self.entry_point)(config)
         except InputError as exc:
             raise RefusedBeforeRun(exc) from exc
 
