@@ -166,3 +166,25 @@ def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whol
     for bad in ("../elsewhere", ".hidden", "a b"):
         with pytest.raises(InputError, match="a model name is letters, digits"):
             registry.ship(one_fold, bad)
+
+
+def test_the_top_level_names_are_listed_and_each_resolves_to_its_documented_object():
+    """``dir(rheograph)`` shows the public names (they are imported lazily, so without ``__dir__`` an
+    interactive user sees none), and each resolves to the object the API reference documents."""
+    import rheograph
+    from rheograph.io.snapshots import read_snapshots
+    from rheograph.learn.networks import register_network
+    from rheograph.learn.predict import load_model
+    from rheograph.learn.registry import list_models
+
+    assert set(rheograph.__all__) <= set(dir(rheograph))
+    documented = {
+        "list_models": list_models,
+        "load_model": load_model,
+        "read_snapshots": read_snapshots,
+        "register_network": register_network,
+    }
+    assert {name: getattr(rheograph, name) for name in rheograph.__all__} == documented
+    api = (ROOT / "docs" / "reference" / "api.md").read_text()
+    for name, obj in documented.items():
+        assert f"::: {obj.__module__}.{name}" in api, f"{name} is missing from the API reference"

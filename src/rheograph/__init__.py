@@ -13,6 +13,10 @@ __version__ = "0.1.0"
 __all__ = ["list_models", "load_model", "read_snapshots", "register_network"]
 
 
+def __dir__():
+    return sorted([*globals(), *__all__])
+
+
 def __getattr__(name):
     # imported on first use: `import rheograph` (and the simulator) stays free of torch
     if name == "load_model":
