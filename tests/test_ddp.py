@@ -13,6 +13,7 @@ from rheograph.learn.train import train_folds
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow  # 20 s: two spawned training processes
 def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
     """Real weight updates: with each process's half of the training set as its one batch, the
     all-reduced gradient of two processes is the full-batch gradient of one, so five epochs of Adam give

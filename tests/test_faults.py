@@ -272,6 +272,7 @@ def tiny_reference(tmp_path_factory):
     return next(root.glob("*/trajectory.h5"))
 
 
+@pytest.mark.slow  # 14 s; test_runner.py resumes after SIGTERM in 3 s
 def test_simulate_killed_with_sigkill_at_random_moments_resumes_to_the_uninterrupted_run(
     tiny_reference, tmp_path
 ):
@@ -374,6 +375,7 @@ def test_tune_with_bad_fixed_overrides_stops_before_the_first_trial(tmp_path):
     assert_one_line_error(code, out, "tune.py: error:", "data.files")
 
 
+@pytest.mark.slow  # 15 s; test_learning.py's killed fold resumes in 3 s
 def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tmp_path):
     """SIGKILL train.py once its first fold has finished; the same command into the same run directory
     keeps that fold (its bundle untouched) and trains the others."""

@@ -569,6 +569,7 @@ def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
         train_folds(compose_train(base), run_dir)
 
 
+@pytest.mark.slow  # 8 s: fold processes
 def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path, caplog):
     """fold_workers=2 trains folds in two processes; with one thread each and the same per-fold seeds, the
     test predictions equal those of one process training the folds in turn, and each fold's epoch lines

@@ -70,7 +70,14 @@ def test_shipped_model_is_its_training_runs_bundles():
 
 
 @pytest.mark.parametrize(
-    "name", ["N400_phi0.70_imaging", "N400_phi0.76_imaging", "N400_phi0.80_imaging", "pooled_N400_imaging"]
+    "name",
+    [
+        # 5-17 s each (relaxations of noisy snapshots): the per-phi models in the long tests
+        pytest.param("N400_phi0.70_imaging", marks=pytest.mark.slow),
+        pytest.param("N400_phi0.76_imaging", marks=pytest.mark.slow),
+        pytest.param("N400_phi0.80_imaging", marks=pytest.mark.slow),
+        "pooled_N400_imaging",
+    ],
 )
 def test_shipped_imaging_model_reproduces_its_committed_noisy_test_predictions(name):
     """The imaging models' published scores are guarded the same way: the seeded noisy copies of a
