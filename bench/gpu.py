@@ -383,8 +383,8 @@ def prediction(
     from contextlib import redirect_stderr
 
     from rheograph.graphs.dataset import snapshot_graphs
+    from rheograph.learn.bundle import predict_dataset
     from rheograph.learn.predict import PREDICT_NODE_BUDGET, load_model
-    from rheograph.learn.train import predict_dataset
 
     cases = [
         (

@@ -88,7 +88,8 @@ def state_means(paths: list[str], min_strain: float) -> dict:
 
 
 def main(argv=None) -> int:
-    from rheograph.io.snapshots import noisy_positions, read_snapshots
+    from rheograph.io.configurations import noisy_positions
+    from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.predict import load_model
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -48,8 +48,9 @@ def fold_rows(run_dir: Path, k: int, cache_dir: Path) -> dict:
     import torch
 
     from rheograph.graphs.dataset import SnapshotGraphDataset
+    from rheograph.learn.bundle import load_bundle
     from rheograph.learn.datamodule import split_files
-    from rheograph.learn.predict import load_bundle, short_relaxation
+    from rheograph.learn.predict import short_relaxation
 
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())
     _, settings, _ = load_bundle(run_dir / f"fold{k}.pt")

@@ -36,7 +36,8 @@ def relaxation_path(path: str, every: int, noises, max_strain: float, solve_at: 
     """Rows (stress, eps, recorded (eta, Pi, Z_mu), strains (S,), eta (S,), Pi (S,), Z_mu (S,), one-solve
     eta at ``solve_at``) for every ``every``-th flowing snapshot of ``path`` at strain >= 1."""
     from rheograph.graphs.features import solve_viscosity
-    from rheograph.io.snapshots import noisy_positions, read_snapshots
+    from rheograph.io.configurations import noisy_positions
+    from rheograph.io.snapshots import read_snapshots
     from rheograph.sim.integrator import SimState, Simulation, particle_pressure
     from rheograph.sim.params import SimParams
 

@@ -46,7 +46,7 @@ def relaxed(snaps, eps: float, strain: float, every: int, rng):
     import dataclasses
 
     from rheograph.graphs.features import relax_positions
-    from rheograph.io.snapshots import noisy_positions
+    from rheograph.io.configurations import noisy_positions
 
     keep = np.arange(0, len(snaps), every)
     params = {**snaps.graph_params(), **snaps.numerics}
@@ -80,12 +80,12 @@ def fold_rows(
     import torch
 
     from rheograph.graphs.dataset import SnapshotGraphDataset, snapshot_graphs
-    from rheograph.io.snapshots import read_snapshots, wrap_into_box
+    from rheograph.io.configurations import wrap_into_box
+    from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.baselines import dataset_arrays, descriptor_trees, physics_rows
+    from rheograph.learn.bundle import load_bundle, predict_dataset
     from rheograph.learn.datamodule import split_files
     from rheograph.learn.module import physical_targets
-    from rheograph.learn.predict import load_bundle
-    from rheograph.learn.train import predict_dataset
     from rheograph.naming import state_point_key
 
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())

@@ -73,7 +73,7 @@ def setup_fold(cfg, k=0):
 
 
 def held_out_scores(module, dm) -> dict:
-    from rheograph.learn.train import predict_dataset
+    from rheograph.learn.bundle import predict_dataset
 
     pred, true, meta = predict_dataset(module, dm.dataset[torch.as_tensor(dm.test_idx)])
     flowing = ~meta["jammed"].astype(bool).ravel()

@@ -35,7 +35,7 @@ from simulate_speed import command_line, publish  # noqa: E402
 def _noisy(snaps, keep, eps: float, rng):
     """The snapshots ``keep`` of ``snaps`` with Gaussian noise of ``eps`` [a] per coordinate added to the
     positions and declared (``position_noise``), as an experimenter who knows their precision would."""
-    from rheograph.io.snapshots import wrap_into_box
+    from rheograph.io.configurations import wrap_into_box
 
     positions = snaps.positions[keep]
     if eps > 0.0:

@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rheograph.analysis import read_lfdem_data, steady_state_summary
+from rheograph.analysis import steady_state_summary
+from rheograph.io.lfdem import read_lfdem_data
 
 REFERENCE = Path(__file__).resolve().parent / "data" / "lfdem_phi0.76"  # LF_DEM output, see its README
 

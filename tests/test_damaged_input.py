@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from rheograph.errors import InputError
-from rheograph.io.snapshots import Snapshots, read_snapshots, write_bare
+from rheograph.io.configurations import Snapshots
+from rheograph.io.snapshots import read_snapshots, write_bare
 
 ROOT = Path(__file__).resolve().parents[1]
 LFDEM = ROOT / "tests" / "data" / "lfdem_run_small"

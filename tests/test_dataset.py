@@ -33,7 +33,7 @@ def test_index_lists_exactly_the_committed_runs(index):
 
 
 def test_flowing_snapshots_have_finite_targets_and_jammed_runs_are_labelled(index):
-    from rheograph.analysis import jammed_snapshots
+    from rheograph.io.hdf5 import jammed_snapshots
 
     for entry in index["runs"]:
         with h5py.File(entry["path"], "r") as h5:

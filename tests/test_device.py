@@ -184,8 +184,8 @@ def test_batched_prediction_equals_the_per_snapshot_path():
     """The forward passes over every snapshot at once (on the CPU device) give each snapshot's prediction
     alone, to float32 round-off, and predict_snapshots' columns are these."""
     from rheograph.graphs.dataset import snapshot_graphs
+    from rheograph.learn.bundle import predict_dataset
     from rheograph.learn.predict import load_model
-    from rheograph.learn.train import predict_dataset
 
     snaps = few_snapshots(5)
     model = load_model("N400_phi0.76", device="cpu")

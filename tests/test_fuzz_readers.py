@@ -27,7 +27,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rheograph.errors import InputError
-from rheograph.io.snapshots import Snapshots, read_snapshots, write_bare
+from rheograph.io.configurations import Snapshots
+from rheograph.io.snapshots import read_snapshots, write_bare
 
 ROOT = Path(__file__).resolve().parents[1]
 LFDEM = ROOT / "tests" / "data" / "lfdem_run_small"
@@ -363,7 +364,7 @@ def test_a_damaged_error_model_reads_valid_or_is_one_line(tmp_path, data):
 @examples(25)
 @given(data=st.data())
 def test_a_damaged_model_bundle_loads_or_is_one_line(tmp_path, data):
-    from rheograph.learn.predict import load_bundle
+    from rheograph.learn.bundle import load_bundle
 
     path = tmp_path / "fold0.pt"
     path.write_bytes(data.draw(damaged((MODEL / "fold0.pt").read_bytes())))

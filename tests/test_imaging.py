@@ -17,7 +17,8 @@ from rheograph.graphs.features import (
     shell_inputs,
     snapshot_pairs,
 )
-from rheograph.io.snapshots import read_snapshots, wrap_into_box
+from rheograph.io.configurations import wrap_into_box
+from rheograph.io.snapshots import read_snapshots
 
 ROOT_DATA = Path(__file__).resolve().parents[1] / "data" / "paper" / "multirun"
 IMAGING = dict(

@@ -405,7 +405,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
 
 
 def test_bundle_loading_refuses_foreign_files(tmp_path):
-    from rheograph.learn.predict import load_bundle
+    from rheograph.learn.bundle import load_bundle
 
     torch.save({"state_dict": {}}, tmp_path / "x.pt")
     with pytest.raises(ValueError, match="not a rheograph model bundle"):
@@ -545,7 +545,8 @@ def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
     import shutil
 
     from rheograph.errors import OtherRunError
-    from rheograph.io.hdf5 import data_fingerprint, read_params
+    from rheograph.io.hdf5 import read_params
+    from rheograph.io.snapshots import data_fingerprint
     from rheograph.learn.train import train_folds
     from rheograph.runner import run_state_point
     from rheograph.sim.params import SimParams

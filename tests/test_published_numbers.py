@@ -45,8 +45,7 @@ def _shipped(name: str) -> tuple[str, str]:
 )
 def test_committed_bundle_reproduces_its_committed_test_predictions(run_dir, bundle):
     from rheograph.graphs.dataset import snapshot_graphs
-    from rheograph.learn.predict import load_bundle
-    from rheograph.learn.train import predict_dataset
+    from rheograph.learn.bundle import load_bundle, predict_dataset
 
     run_dir = ROOT / run_dir
     path, expected, truth = _first_test_run(run_dir, 0)
@@ -84,8 +83,7 @@ def test_shipped_imaging_model_reproduces_its_committed_noisy_test_predictions(n
     test trajectory, relaxed and read as in training, give the committed predictions."""
     from rheograph.graphs.dataset import noisy_copy, snapshot_graphs
     from rheograph.io.snapshots import read_snapshots
-    from rheograph.learn.predict import load_bundle
-    from rheograph.learn.train import predict_dataset
+    from rheograph.learn.bundle import load_bundle, predict_dataset
 
     run_dir, bundle = _shipped(name)
     run_dir = ROOT / run_dir

@@ -541,8 +541,8 @@ def test_jam_detection_ends_a_stalled_run(tmp_path):
     # the last snapshot is the arrested packing, at the strain where the run stopped; the snapshots from
     # the stalled window on are labelled jammed, earlier ones flowed; the learning keeps the jammed ones
     # at any strain (an arrested packing is no start-up transient) and marks exactly those
-    from rheograph.analysis import jammed_snapshots
     from rheograph.graphs.dataset import GraphSettings, snapshot_graphs
+    from rheograph.io.hdf5 import jammed_snapshots
 
     with h5py.File(tmp_path / "jam.h5") as h5:
         snap_strain, z_mu = h5["snapshots/strain"][()], h5["snapshots/z_mu"][()]
@@ -616,7 +616,7 @@ def test_snapshots_are_labelled_jammed_from_the_first_row_of_the_detectors_windo
     """The run ends at the row where the detector fires; its window holds the last jam_intervals
     intervals, i.e. starts jam_intervals rows earlier.  A snapshot taken inside the window's first
     interval shows the stalled packing (jammed); one taken before the window flowed."""
-    from rheograph.analysis import jammed_snapshots
+    from rheograph.io.hdf5 import jammed_snapshots
     from rheograph.runner import first_jammed_row
 
     stress, eta_jam, intervals = 10.0, 1e5, 10

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rheograph.analysis import read_lfdem_data, steady_state_summary
+from rheograph.analysis import steady_state_summary
+from rheograph.io.lfdem import read_lfdem_data
 
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURES = ROOT / "tests" / "data" / "lfdem_phi0.76"

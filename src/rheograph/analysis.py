@@ -54,21 +54,6 @@ def steady_state_summary(
     return out
 
 
-def read_lfdem_data(path) -> dict:
-    """Columns of an LF_DEM ``data_*.dat`` time series (see data/lfdem_reference/README.md)."""
-    table = np.loadtxt(path, comments="#")
-    return {
-        "time": table[:, 0],
-        "strain": table[:, 1],
-        "shear_rate": table[:, 2],
-        "viscosity": table[:, 3],
-        "pressure": table[:, 11],
-        "z": table[:, 17],
-        "z_mu": table[:, 18],
-        "dt": table[:, 22],
-    }
-
-
 def decorrelation_strain(values, strain_step: float) -> float:
     """Strain over which the normalised autocorrelation of an evenly sampled series first drops below
     1/e (the integral-free, noise-robust choice), linearly interpolated between samples.
@@ -120,22 +105,6 @@ def stall_start(strain, slow) -> float | None:
         return None
     first = 0 if slow.all() else slow.size - int(np.argmin(slow[::-1]))
     return float(np.asarray(strain)[first])
-
-
-def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals: int) -> np.ndarray:
-    """(S,) bool: the snapshots of a run taken after its flow stopped.
-
-    A run ends ``jammed`` when over its last ``jam_intervals`` output intervals -- between its last
-    ``jam_intervals`` + 1 rows -- the flow was together slower than the jam viscosity (rheograph.runner);
-    the snapshots from the first row of that window on show the arrested packing (its Π and Z_μ are
-    targets, its η_r is not), the earlier ones a flowing suspension.  All False for a run that did not
-    jam."""
-    snapshot_strain = np.asarray(snapshot_strain, dtype=np.float64)
-    series_strain = np.asarray(series_strain, dtype=np.float64)
-    if status != "jammed" or series_strain.size == 0:
-        return np.zeros(snapshot_strain.size, dtype=bool)
-    onset = series_strain[max(series_strain.size - 1 - int(jam_intervals), 0)]
-    return snapshot_strain >= onset
 
 
 def ensemble_transient(

@@ -22,12 +22,12 @@ import numpy as np
 from rheograph.analysis import (
     decorrelation_strain,
     ensemble_transient,
-    jammed_snapshots,
     stall_start,
     transient_strain,
 )
 from rheograph.errors import InputError, one_line_errors
 from rheograph.flowcurve import collect
+from rheograph.io.hdf5 import jammed_snapshots
 from rheograph.io.index import USABLE, build_index, write_index
 from rheograph.sim.params import SimParams
 

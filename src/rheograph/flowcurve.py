@@ -20,10 +20,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rheograph.analysis import read_lfdem_data, steady_state_summary
+from rheograph.analysis import steady_state_summary
 from rheograph.errors import InputError, one_line_errors
+from rheograph.io.configurations import DAMAGED_FILE_ERRORS
 from rheograph.io.hdf5 import PRODUCER, read_run_info, read_timeseries
-from rheograph.io.snapshots import DAMAGED_FILE_ERRORS
+from rheograph.io.lfdem import read_lfdem_data
 from rheograph.sim.params import scheme_name
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")

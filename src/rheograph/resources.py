@@ -41,7 +41,7 @@ GRAPH_BYTES_PER_PARTICLE = 200.0
 # batch: 303 MB for a batch of 25 N = 2000 graphs (6.1 kB per node; 1.2 kB per node at N = 400, where the
 # allocator reused a warm-up's memory).
 PREDICTION_BYTES_PER_NODE = 6.5e3
-PREDICTION_BATCH = 64  # graphs per forward pass (rheograph.learn.train.predict_dataset's default)
+PREDICTION_BATCH = 64  # graphs per forward pass (rheograph.learn.bundle.predict_dataset's default)
 
 
 def simulation_bytes(n_particles: int) -> float:

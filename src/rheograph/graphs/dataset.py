@@ -36,8 +36,9 @@ from rheograph.graphs.features import (
     snapshot_edges,
     solve_viscosity,
 )
+from rheograph.io.configurations import Snapshots, wrap_into_box
 from rheograph.io.hdf5 import SCHEMA_VERSION
-from rheograph.io.snapshots import Snapshots, read_snapshots, wrap_into_box
+from rheograph.io.snapshots import read_snapshots
 from rheograph.resources import check_memory, graph_bytes
 
 TARGETS = ("viscosity", "pressure", "z_mu")

@@ -470,35 +470,6 @@ def read_params(path: str | Path) -> dict:
         return json.loads(h5.attrs["params"])
 
 
-def data_fingerprint(paths) -> str:
-    """Hash of what trajectory files hold — parameters, status, strain and steps reached — not of where
-    they lie or when they were copied: equal for a clone of the same data; different once a file is added
-    or removed, a run extended, or a state point resimulated with other parameters (a resimulation with
-    the same parameters to the same strain in the same number of steps is not told apart: changed dynamics
-    change the step count)."""
-    import hashlib
-
-    from rheograph.io.snapshots import source_kind
-
-    identities = []
-    for path in paths:
-        if source_kind(path) != "rheograph":  # a bare file or an LF_DEM run: what it holds is its bytes
-            identities.append(hashlib.sha1(Path(path).read_bytes()).hexdigest())
-            continue
-        try:
-            info = read_run_info(path)
-        except (OSError, KeyError, ValueError, TypeError) as exc:  # ValueError: params not JSON
-            raise TrajectoryFileError(
-                f"{path}: cannot be read ({exc}); if a simulation is still writing it, wait or train on a "
-                "sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun that "
-                "state point"
-            ) from exc
-        identities.append(
-            json.dumps([info[k] for k in ("params", "status", "strain", "steps")], sort_keys=True)
-        )
-    return hashlib.sha1("\n".join(sorted(identities)).encode()).hexdigest()[:16]
-
-
 def read_checkpoint(path: str | Path) -> tuple[SimParams, SimState]:
     """The parameters and the exact state at the checkpoint of a trajectory file, read only (the file is
     left as it is: for analyses that continue a run without extending it)."""
@@ -671,3 +642,19 @@ def respace_snapshots(path: str | Path, interval: float, dry_run: bool = False) 
 
     rewrite(path, compressed=compact, keep_snapshots=keep, edit=new_spacing)
     return int(strain.size), int(len(keep))
+
+
+def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals: int) -> np.ndarray:
+    """(S,) bool: the snapshots of a run taken after its flow stopped.
+
+    A run ends ``jammed`` when over its last ``jam_intervals`` output intervals -- between its last
+    ``jam_intervals`` + 1 rows -- the flow was together slower than the jam viscosity (rheograph.runner);
+    the snapshots from the first row of that window on show the arrested packing (its Π and Z_μ are
+    targets, its η_r is not), the earlier ones a flowing suspension.  All False for a run that did not
+    jam."""
+    snapshot_strain = np.asarray(snapshot_strain, dtype=np.float64)
+    series_strain = np.asarray(series_strain, dtype=np.float64)
+    if status != "jammed" or series_strain.size == 0:
+        return np.zeros(snapshot_strain.size, dtype=bool)
+    onset = series_strain[max(series_strain.size - 1 - int(jam_intervals), 0)]
+    return snapshot_strain >= onset

@@ -16,8 +16,8 @@ from pathlib import Path
 import h5py
 
 from rheograph.errors import InputError
+from rheograph.io.configurations import DAMAGED_FILE_ERRORS
 from rheograph.io.hdf5 import PRODUCER, read_run_info
-from rheograph.io.snapshots import DAMAGED_FILE_ERRORS
 
 USABLE = ("completed", "jammed")
 

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from rheograph.errors import InputError
-from rheograph.io.snapshots import Snapshots, area_fraction, check_geometry, wrap_into_box
+from rheograph.io.configurations import Snapshots, area_fraction, check_geometry, wrap_into_box
 
 # LF_DEM's defaults (SimulationInit.cpp, setDefaultParameters) for the keys read here
 LFDEM_DEFAULTS = {
@@ -409,3 +409,18 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
         numerics=numerics,
         position_noise=rounding,
     )
+
+
+def read_lfdem_data(path) -> dict:
+    """Columns of an LF_DEM ``data_*.dat`` time series (see data/lfdem_reference/README.md)."""
+    table = np.loadtxt(path, comments="#")
+    return {
+        "time": table[:, 0],
+        "strain": table[:, 1],
+        "shear_rate": table[:, 2],
+        "viscosity": table[:, 3],
+        "pressure": table[:, 11],
+        "z": table[:, 17],
+        "z_mu": table[:, 18],
+        "dt": table[:, 22],
+    }

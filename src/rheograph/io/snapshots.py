@@ -21,175 +21,54 @@ model) names it.
 from __future__ import annotations
 
 import difflib
+import hashlib
 import json
 import logging
 import math
-import zipfile
-import zlib
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from rheograph.errors import InputError
+from rheograph.io.configurations import (
+    DAMAGED_FILE_ERRORS,
+    PHYSICAL_PARAMS,
+    TARGET_KEYS,
+    Snapshots,
+    check_configurations,
+    check_geometry,
+    size_ratio,
+    wrap_into_box,
+)
+from rheograph.io.hdf5 import (
+    SCHEMA_VERSION,
+    TrajectoryFileError,
+    jammed_snapshots,
+    last_checkpoint_copy,
+    read_run_info,
+    readable_path,
+)
+from rheograph.io.lfdem import read_lfdem
 
 log = logging.getLogger("rheograph")
 
-# what a snapshot's physics depends on: they describe the suspension and come with the snapshot
-PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "critical_load", "size_ratio")
 # of them, those a bare file must carry (critical_load is the unit of force, 1 by definition, and the size
 # ratio is read off the radii)
 BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap")
-TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
 # every key a bare snapshot file may hold (module docstring); dt_max and lagged_step_control, the rest of
 # the step a source was made with, are recorded by write_bare beside disp_max
 BARE_KEYS = (
     "positions", "radii", "box", "le_offset", "stress", "phi", *PHYSICAL_PARAMS, "strain", *TARGET_KEYS,
     "position_noise", "disp_max", "dt_max", "lagged_step_control",
 )  # fmt: skip
-# what reading a damaged or malformed file raises: a cut or bit-flipped zip (.npz: also a flipped
-# compression method or encryption flag, NotImplementedError / RuntimeError), gzip or HDF5 file (h5py:
-# also RuntimeError), or values of the wrong type or shape
-DAMAGED_FILE_ERRORS = (
-    OSError,
-    EOFError,
-    zipfile.BadZipFile,
-    zlib.error,
-    NotImplementedError,
-    RuntimeError,
-    ValueError,
-    KeyError,
-    IndexError,
-    TypeError,
-)
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
-
-
-@dataclass
-class Snapshots:
-    """S configurations of one N-particle system at one state point, in rheograph's units and box.
-
-    ``positions`` (S, N, 2) [a] wrapped into the primary box; ``radii`` (N,) [a], smallest 1; ``lx``,
-    ``ly`` [a]; ``le_offset`` (S,) [a]; ``strain`` (S,) (NaN where the source does not say); ``stress``
-    σ/σ0; ``phi`` area fraction; ``params``: the physical parameters the source carries (a subset of
-    ``PHYSICAL_PARAMS``); ``numerics``: the simulation step the source was made with, where known
-    (``disp_max``, ``dt_max``, ``lagged_step_control``); ``targets`` (S, 3): η_r, Π [σ0], Z_μ (NaN where
-    unknown); ``jammed`` (S,) bool (arrested packings, whose η_r is not a target); ``contacts``: per
-    snapshot the recorded contact states (pairs, states, stretches) of a rheograph trajectory, else None;
-    ``position_noise`` [a]: the stated precision of the positions, RMS per coordinate (0 for exact
-    simulator output; None where a bare file or a caller does not state it)."""
-
-    source: str
-    kind: str
-    positions: np.ndarray
-    radii: np.ndarray
-    lx: float
-    ly: float
-    le_offset: np.ndarray
-    strain: np.ndarray
-    stress: float
-    phi: float
-    params: dict
-    targets: np.ndarray
-    jammed: np.ndarray
-    numerics: dict = field(default_factory=dict)
-    contacts: list | None = None
-    position_noise: float | None = 0.0
-    status: str = ""
-
-    @property
-    def n_particles(self) -> int:
-        return int(self.radii.size)
-
-    def __len__(self) -> int:
-        return int(self.positions.shape[0])
-
-    def graph_params(self) -> dict:
-        """The parameter mapping graph features and the one-solve read: physical parameters, the state
-        point and N (``rheograph.graphs.features``)."""
-        return {**self.params, "stress": self.stress, "phi": self.phi, "n_particles": self.n_particles}
-
-    def missing_params(self, names=PHYSICAL_PARAMS) -> list[str]:
-        return [name for name in names if name not in self.params]
-
-
-def wrap_into_box(positions: np.ndarray, lx: float, ly: float, le_offset: float) -> np.ndarray:
-    """Positions (N, 2) [a], anywhere, mapped into [-Lx/2, Lx/2) x [-Ly/2, Ly/2): each crossing of the
-    top (bottom) boundary shifts x by -(+) le_offset, as the Lees–Edwards images do."""
-    out = np.array(positions, dtype=np.float64)
-    images = np.floor(out[:, 1] / ly + 0.5)
-    out[:, 1] -= images * ly
-    out[:, 0] -= images * le_offset
-    out[:, 0] -= lx * np.floor(out[:, 0] / lx + 0.5)
-    return out
-
-
-def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generator) -> np.ndarray:
-    """Snapshot ``k``'s positions (N, 2) [a] plus Gaussian noise of ``eps`` [a] per coordinate drawn from
-    ``rng``, wrapped into the box (an imaging-grade copy of it)."""
-    return wrap_into_box(
-        snaps.positions[k] + rng.normal(0.0, eps, snaps.positions[k].shape),
-        snaps.lx,
-        snaps.ly,
-        snaps.le_offset[k],
-    )
-
-
-def area_fraction(radii, lx: float, ly: float) -> float:
-    with np.errstate(over="ignore"):  # radii of a damaged file: inf, refused by the caller's check
-        return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
-
-
-def check_geometry(where: str, radii, lx, ly, phi) -> None:
-    """Radii in units of the small radius, a positive box, and the stated φ equal to the one the radii
-    and box give (to 1e-3: files round it)."""
-    radii = np.asarray(radii, dtype=np.float64)
-    if radii.ndim != 1 or radii.size < 2 or not np.all(np.isfinite(radii)) or radii.min() <= 0:
-        raise InputError(f"{where}: radii must be (N,) positive numbers, N >= 2")
-    if not math.isclose(float(radii.min()), 1.0, rel_tol=1e-6):
-        raise InputError(
-            f"{where}: lengths must be in units of the small radius a (smallest radius 1, found "
-            f"{radii.min():.6g}): divide positions, radii, box and le_offset by it"
-        )
-    if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
-        raise InputError(f"{where}: box must be two positive lengths (Lx, Ly) [a], found ({lx}, {ly})")
-    measured = area_fraction(radii, lx, ly)
-    if not math.isclose(measured, phi, abs_tol=1e-3):
-        raise InputError(
-            f"{where}: phi = {phi:g} but the radii and box give an area fraction {measured:.6g}: check the "
-            "box (Lx, Ly) and the radii's units"
-        )
-
-
-def check_configurations(where: str, positions, radii, le_offset, strain, targets) -> None:
-    """Positions (S, N, 2) [a] and offsets (S,) [a] finite, with N the radii's; strain (S,) and targets
-    (S, 3) finite or NaN (unknown), never infinite: what a damaged file gives otherwise."""
-    n_snap = len(positions)
-    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
-        raise InputError(
-            f"{where}: positions must be (S, N, 2) with N = {radii.size} (the radii), found {positions.shape}"
-        )
-    if not np.all(np.isfinite(positions)):
-        raise InputError(f"{where}: positions contain non-finite values")
-    if le_offset.shape != (n_snap,) or not np.all(np.isfinite(le_offset)):
-        raise InputError(f"{where}: le_offset must be ({n_snap},) finite numbers, one per snapshot")
-    if strain.shape != (n_snap,) or targets.shape != (n_snap, 3):
-        raise InputError(f"{where}: the strain and the targets need one value per snapshot ({n_snap})")
-    if np.isinf(strain).any() or np.isinf(targets).any():
-        raise InputError(f"{where}: the strain or the targets contain infinite values")
-
-
-def _size_ratio(radii) -> float:
-    return round(float(np.max(radii) / np.min(radii)), 6)
 
 
 # ---- rheograph trajectories ------------------------------------------------------------------------
 def _open_trajectory(path: Path) -> tuple[h5py.File, Path]:
     """The file, or where a simulation still holds it (HDF5 file lock), its copy as of the last
     checkpoint (consistent on disk: written right after a flush)."""
-    from rheograph.io.hdf5 import readable_path
-
     try:
         readable = readable_path(path)
         return h5py.File(readable, "r"), readable
@@ -202,9 +81,6 @@ def _open_trajectory(path: Path) -> tuple[h5py.File, Path]:
 
 def read_trajectory(path: str | Path) -> Snapshots:
     """The snapshots of a rheograph-layout trajectory (``/snapshots``, ``/radii``, root ``params``)."""
-    from rheograph.analysis import jammed_snapshots
-    from rheograph.io.hdf5 import SCHEMA_VERSION
-
     path = Path(path)
     h5, opened = _open_trajectory(path)
     with h5:
@@ -400,7 +276,7 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         raise InputError(f"{where}: stress = {stress:g} must be > 0 (σ/σ0)")
     check_geometry(where, radii, lx, ly, phi)
     params = {key: _scalar(values, key, where) for key in PHYSICAL_PARAMS if key in values}
-    measured_ratio = _size_ratio(radii)
+    measured_ratio = size_ratio(radii)
     if "size_ratio" in params and not math.isclose(params["size_ratio"], measured_ratio, rel_tol=1e-5):
         raise InputError(
             f"{where}: size_ratio = {params['size_ratio']:g} but the radii give {measured_ratio:g}"
@@ -482,7 +358,6 @@ def source_kind(path: str | Path) -> str:
         # superblock (HDF5's RuntimeError): the trajectory reader names what is wrong
         except (OSError, RuntimeError):
             return "rheograph"
-    from rheograph.io.hdf5 import last_checkpoint_copy
 
     if last_checkpoint_copy(path).exists():  # damaged mid-write; its copy is readable
         return "rheograph"
@@ -513,8 +388,6 @@ def _read_source(path: str | Path, lfdem_params: str | Path | None, params: dict
         raise InputError(f"{path}: an LF_DEM parameter file was given, but this is not an LF_DEM par_*.dat")
     try:
         if kind == "lfdem":
-            from rheograph.io.lfdem import read_lfdem
-
             return read_lfdem(path, lfdem_params)
         return read_trajectory(path) if kind == "rheograph" else read_bare(path, params)
     except InputError:
@@ -524,3 +397,28 @@ def _read_source(path: str | Path, lfdem_params: str | Path | None, params: dict
             f"{path}: cannot be read as {KIND_NAMES[kind]} ({type(exc).__name__}: {exc}); is it truncated "
             "or of another format?"
         ) from exc
+
+
+def data_fingerprint(paths) -> str:
+    """Hash of what trajectory files hold — parameters, status, strain and steps reached — not of where
+    they lie or when they were copied: equal for a clone of the same data; different once a file is added
+    or removed, a run extended, or a state point resimulated with other parameters (a resimulation with
+    the same parameters to the same strain in the same number of steps is not told apart: changed dynamics
+    change the step count)."""
+    identities = []
+    for path in paths:
+        if source_kind(path) != "rheograph":  # a bare file or an LF_DEM run: what it holds is its bytes
+            identities.append(hashlib.sha1(Path(path).read_bytes()).hexdigest())
+            continue
+        try:
+            info = read_run_info(path)
+        except (OSError, KeyError, ValueError, TypeError) as exc:  # ValueError: params not JSON
+            raise TrajectoryFileError(
+                f"{path}: cannot be read ({exc}); if a simulation is still writing it, wait or train on a "
+                "sweep index of finished runs; if it is truncated or corrupt, move it aside and rerun that "
+                "state point"
+            ) from exc
+        identities.append(
+            json.dumps([info[k] for k in ("params", "status", "strain", "steps")], sort_keys=True)
+        )
+    return hashlib.sha1("\n".join(sorted(identities)).encode()).hexdigest()[:16]

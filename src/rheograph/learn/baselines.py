@@ -143,9 +143,9 @@ def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
     from pathlib import Path
 
     from rheograph.graphs.dataset import SnapshotGraphDataset
+    from rheograph.learn.bundle import bundle_graph_settings, read_bundle
     from rheograph.learn.datamodule import split_files
     from rheograph.learn.module import fold_metrics
-    from rheograph.learn.predict import bundle_graph_settings, read_bundle
     from rheograph.naming import state_point_key
 
     run_dir = Path(run_dir)

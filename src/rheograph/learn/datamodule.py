@@ -332,8 +332,9 @@ def thin_snapshots(idx: np.ndarray, runs: np.ndarray, fraction: float) -> np.nda
 def source_summary(path: str, lfdem_params=None) -> dict:
     """State point, N, physical parameters and simulation step of a snapshot source: ``phi``,
     ``stress``, ``n_particles``, ``params`` (physical), ``numerics`` (rheograph.io.snapshots)."""
+    from rheograph.io.configurations import PHYSICAL_PARAMS
     from rheograph.io.hdf5 import read_params
-    from rheograph.io.snapshots import PHYSICAL_PARAMS, read_snapshots, source_kind
+    from rheograph.io.snapshots import read_snapshots, source_kind
 
     if source_kind(path) == "rheograph":
         try:
@@ -371,7 +372,7 @@ def suspension_record(files, lfdem_params=None) -> dict:
     computed: ``physical_params`` (PHYSICAL_PARAMS, one value each: files of different suspensions are
     refused, a model has no input for them) and ``solve_numerics``, per area fraction and N the step
     (``disp_max``, ``dt_max``, ``lagged_step_control``) the one-solve input of its graphs used."""
-    from rheograph.io.snapshots import PHYSICAL_PARAMS
+    from rheograph.io.configurations import PHYSICAL_PARAMS
     from rheograph.sim.params import SimParams
 
     physical, numerics = {}, {}

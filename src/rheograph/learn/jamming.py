@@ -9,7 +9,7 @@ then nearest log σ); a state point is called jammed when at least half its trai
 Its accuracy is the share of held-out trajectories whose outcome (jammed or not) the rule gets right.
 
 A trajectory counts as jammed when any of its snapshots is labelled jammed
-(``rheograph.analysis.jammed_snapshots``: the arrested packing); η_r is never scored on those snapshots.
+(``rheograph.io.hdf5.jammed_snapshots``: the arrested packing); η_r is never scored on those snapshots.
 """
 
 from __future__ import annotations

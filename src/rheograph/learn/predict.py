@@ -51,13 +51,13 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
-from rheograph.io.snapshots import PHYSICAL_PARAMS, Snapshots, read_snapshots, snapshots_from_values
+from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots
+from rheograph.io.snapshots import read_snapshots, snapshots_from_values
+from rheograph.learn.bundle import load_bundle, predict_dataset
 from rheograph.learn.error_model import predicted_error, read_error_model
 from rheograph.learn.jamming import jammed_fraction
-from rheograph.learn.module import TARGET_NAMES, SurrogateModule, network_hparams
-from rheograph.learn.networks import registered_network
+from rheograph.learn.module import TARGET_NAMES
 from rheograph.learn.registry import list_models, model_paths, read_card
-from rheograph.learn.train import BUNDLE_FORMAT, predict_dataset
 from rheograph.resources import check_memory, prediction_bytes
 
 # Models trained on simulator output read overlaps of ~1e-3 a exactly (positions stored to 1e-7 a):
@@ -68,61 +68,6 @@ EXACT_POSITION_PRECISION = 3e-5
 # the precision of particle tracking in a microscope [a]: which imaging models an exact model's flag names
 # when a snapshot's overlaps betray imprecise positions that it did not declare
 TRACKING_PRECISION = 0.01
-
-
-def read_bundle(path: str | Path) -> dict:
-    """The contents of a bundle written by ``train.save_bundle``: tensors and plain values, read with
-    ``torch.load(weights_only=True)``; anything else is refused in one line."""
-    try:
-        bundle = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # a truncated or foreign file: torch raises several types, in many lines
-        text = str(exc).strip()
-        if text.startswith("Weights only load failed"):  # torch's advice to load unsafely does not apply
-            why = "not a torch file of tensors and plain values, as bundles are"
-        else:  # the first sentence: the rest is torch's advice to its own developers
-            why = (text.splitlines() or [type(exc).__name__])[0].split(". ")[0][:160]
-        raise InputError(
-            f"{path}: not a readable rheograph model bundle ({why}); a model is a shipped model's name, "
-            "a training run directory or one of its fold*.pt"
-        ) from exc
-    if not isinstance(bundle, dict) or bundle.get("format") != BUNDLE_FORMAT:
-        raise InputError(
-            f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
-            "retrained"
-        )
-    return bundle
-
-
-def bundle_graph_settings(bundle: dict) -> GraphSettings:
-    """The graph settings a bundle (``read_bundle``) was trained with."""
-    graph = dict(bundle["graph"])
-    graph["edge_features"] = tuple(graph["edge_features"])
-    graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
-    graph["noise_range"] = tuple(graph.get("noise_range", ()))
-    return GraphSettings(**graph)
-
-
-def load_bundle(
-    path: str | Path, network_class: type | None = None
-) -> tuple[SurrogateModule, GraphSettings, dict]:
-    """(module, graph settings, training domain) of a bundle written by ``train.save_bundle``.  The
-    module is ``SurrogateModule`` or the registered subclass the bundle names (rheograph.learn.networks;
-    ``network_class``: one registered for this call)."""
-    bundle = read_bundle(path)
-    module_class = registered_network(bundle.get("module_class"), path, network_class)
-    try:  # a damaged bundle: entries missing or of the wrong type, weights of another network
-        module = module_class(**network_hparams(bundle["hparams"], module_class))
-        module.load_state_dict(bundle["state_dict"])
-        module.eval()
-        settings = bundle_graph_settings(bundle)
-        domain = dict(bundle["domain"])
-        missing = {"phi", "stress", "n_particles", "size_ratio", "edge_min", "edge_max"} - set(domain)
-        if missing:
-            raise KeyError(f"its training domain lacks {sorted(missing)}")
-        return module, settings, domain
-    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
-        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
-        raise InputError(f"{path}: a damaged rheograph model bundle ({type(exc).__name__}: {why})") from exc
 
 
 def trained_noise(domain: dict) -> tuple[float, float]:

@@ -16,16 +16,13 @@ versus learned.
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import math
 import shutil
 from pathlib import Path
 
-import torch
-
 from rheograph.errors import InputError
-from rheograph.learn.datamodule import suspension_record
+from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle, write_lightning_checkpoint
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
@@ -104,16 +101,6 @@ COMPUTED_INPUTS = {
     "relaxed_pressure": "the particle pressure of the relaxed configuration",
     "relaxed_coordination": "the frictional contacts of the relaxed configuration",
 }
-
-
-def _complete_bundle(bundle: dict, split_file: Path) -> dict:
-    """A bundle with the suspension record of its training data (bundles of older runs lack it): the
-    split file lists every run of the training run's dataset, one suspension."""
-    domain = bundle["domain"]
-    if "physical_params" in domain and "solve_numerics" in domain:
-        return bundle
-    files = json.loads(split_file.read_text())["files"]
-    return {**bundle, "domain": {**domain, **suspension_record(files)}}
 
 
 def _score_rows(metrics: dict) -> list[dict]:
@@ -299,24 +286,6 @@ def card_markdown(card: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_lightning_checkpoint(bundle: dict, path: Path) -> None:
-    """The weights and hyperparameters of a fold bundle as a Lightning checkpoint at ``path``:
-    ``SurrogateModule.load_from_checkpoint(path)`` (or that of the class the card names) rebuilds the
-    module (the graph settings and the trained domain stay in the bundle)."""
-    import lightning as L
-
-    buffer = io.BytesIO()
-    torch.save(
-        {
-            "state_dict": bundle["state_dict"],
-            "hyper_parameters": bundle["hparams"],
-            "pytorch-lightning_version": L.__version__,
-        },
-        buffer,
-    )
-    path.write_bytes(buffer.getvalue())
-
-
 def ship(run_dir: str | Path, name: str, replace: bool = False) -> Path:
     """Makes ``rheograph/models/<name>/`` from the training run ``run_dir``.  A model already shipped
     under ``name`` is kept unless ``replace``; then the new one is built beside it and swapped in whole,
@@ -345,11 +314,8 @@ def ship(run_dir: str | Path, name: str, replace: bool = False) -> Path:
     try:
         first = None
         for path in bundles:
-            bundle = torch.load(path, map_location="cpu", weights_only=True)
-            bundle = _complete_bundle(bundle, path.with_name(path.stem + "_split.json"))
-            buffer = io.BytesIO()
-            torch.save(bundle, buffer)
-            (staging / path.name).write_bytes(buffer.getvalue())
+            bundle = complete_bundle(read_bundle(path), path.with_name(path.stem + "_split.json"))
+            write_bundle(staging / path.name, bundle)
             write_lightning_checkpoint(bundle, staging / f"{path.stem}.ckpt")
             first = first or bundle
         if (run_dir / "error_model.json").is_file():

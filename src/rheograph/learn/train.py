@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import json
 import logging
 import logging.handlers
@@ -18,8 +17,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from rheograph.errors import InputError, OtherRunError
 from rheograph.graphs.dataset import GraphSettings
-from rheograph.io.hdf5 import data_fingerprint
+from rheograph.io.snapshots import data_fingerprint
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
+from rheograph.learn.bundle import predict_dataset, save_bundle
 from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
@@ -27,10 +27,8 @@ from rheograph.learn.module import (
     TARGET_NAMES,
     EpochLog,
     FoldResumePoint,
-    SurrogateModule,
     check_training_factories,
     fold_metrics,
-    physical_targets,
 )
 from rheograph.naming import state_point_key
 
@@ -78,48 +76,6 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
     values["graph_inputs"] = tuple(values.get("graph_inputs", ()))
     values["noise_range"] = tuple(values.get("noise_range", ()))
     return GraphSettings(**values)
-
-
-BUNDLE_FORMAT = "rheograph-surrogate-2"
-
-
-def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str, domain: dict) -> None:
-    """A checkpoint loadable with torch.load(weights_only=True): tensors and plain Python values only.
-
-    ``domain`` records what the model was trained on (phi and sigma ranges, N, size ratio, edge-feature
-    ranges) so that predictions outside it are flagged."""
-    hp = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(module.hparams).items()}
-    buffer = io.BytesIO()
-    torch.save(
-        {
-            "format": BUNDLE_FORMAT,
-            # a subclass of SurrogateModule (another network) is rebuilt as itself; SurrogateModule's own
-            # bundles carry no class name, so that they outlive a move of its module
-            "module_class": None
-            if type(module) is SurrogateModule
-            else f"{type(module).__module__}:{type(module).__qualname__}",
-            "state_dict": module.state_dict(),
-            "hparams": hp,
-            "graph": {
-                **settings.__dict__,
-                "edge_features": list(settings.edge_features),
-                "graph_inputs": list(settings.graph_inputs),
-                "noise_range": list(settings.noise_range),
-            },
-            "fold": fold,
-            "split": split,
-            "domain": domain,
-        },
-        buffer,
-    )
-    # written by Python, not torch's writer: a full disk raises OSError (ENOSPC, one line at the entry
-    # points) instead of torch's errno-less RuntimeError; through a temporary file, so a bundle is whole
-    tmp = Path(path).with_name(Path(path).name + ".tmp")
-    try:
-        tmp.write_bytes(buffer.getvalue())
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
@@ -543,41 +499,6 @@ def load_finished_fold(run_dir: Path, k: int):
     }
     arrays["fold"] = int(arrays["fold"])
     return json.loads(done.read_text()), {**arrays, "baselines": baselines}
-
-
-@torch.no_grad()
-def predict_dataset(module, dataset, batch_size: int = 64, device=None):
-    """Physical predictions and truths (G, 3) and per-graph metadata for a dataset of graphs, in forward
-    passes of ``batch_size`` graphs on ``device`` (None: where the module is)."""
-    from torch_geometric.loader import DataLoader
-
-    module.eval()
-    if device is not None:
-        module.to(device)
-    device = next(module.parameters()).device
-    preds, trues, stress, phi, run, jammed, size = [], [], [], [], [], [], []
-    for batch in DataLoader(dataset, batch_size=batch_size):
-        preds.append(module(batch.to(device)).cpu().numpy())
-        batch = batch.cpu()  # moved in place: its truths and metadata back as numpy
-        trues.append(batch.y_raw.numpy())
-        stress.append(batch.stress.numpy())
-        phi.append(batch.phi.numpy())
-        run.append(batch.run_id.numpy())
-        jammed.append(batch.jammed.numpy())
-        size.append(batch.n_particles.numpy())
-    hp = module.hparams
-    pred = physical_targets(np.concatenate(preds), hp.viscosity_scale, hp.pressure_scale)
-    return (
-        pred,
-        np.concatenate(trues),
-        {
-            "stress": np.concatenate(stress),
-            "phi": np.concatenate(phi),
-            "run_id": np.concatenate(run),
-            "jammed": np.concatenate(jammed),
-            "n_particles": np.concatenate(size),
-        },
-    )
 
 
 def _stack_predictions(predictions) -> dict:

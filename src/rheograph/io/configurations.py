@@ -1,0 +1,154 @@
+"""The in-memory form every snapshot reader produces (``Snapshots``: configurations of one suspension at
+one state point, with what the source says about them), and the geometry checks the readers apply.
+
+Readers live beside it: ``rheograph.io.snapshots`` (any source), ``rheograph.io.hdf5`` (rheograph
+trajectories) and ``rheograph.io.lfdem`` (LF_DEM runs).
+"""
+
+from __future__ import annotations
+
+import math
+import zipfile
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rheograph.errors import InputError
+
+# what a snapshot's physics depends on: they describe the suspension and come with the snapshot
+PHYSICAL_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_gap", "critical_load", "size_ratio")
+TARGET_KEYS = ("eta_r", "pressure", "z_mu")  # bare-file names of the targets η_r, Π [σ0], Z_μ
+# what reading a damaged or malformed file raises: a cut or bit-flipped zip (.npz: also a flipped
+# compression method or encryption flag, NotImplementedError / RuntimeError), gzip or HDF5 file (h5py:
+# also RuntimeError), or values of the wrong type or shape
+DAMAGED_FILE_ERRORS = (
+    OSError,
+    EOFError,
+    zipfile.BadZipFile,
+    zlib.error,
+    NotImplementedError,
+    RuntimeError,
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+)
+
+
+@dataclass
+class Snapshots:
+    """S configurations of one N-particle system at one state point, in rheograph's units and box.
+
+    ``positions`` (S, N, 2) [a] wrapped into the primary box; ``radii`` (N,) [a], smallest 1; ``lx``,
+    ``ly`` [a]; ``le_offset`` (S,) [a]; ``strain`` (S,) (NaN where the source does not say); ``stress``
+    σ/σ0; ``phi`` area fraction; ``params``: the physical parameters the source carries (a subset of
+    ``PHYSICAL_PARAMS``); ``numerics``: the simulation step the source was made with, where known
+    (``disp_max``, ``dt_max``, ``lagged_step_control``); ``targets`` (S, 3): η_r, Π [σ0], Z_μ (NaN where
+    unknown); ``jammed`` (S,) bool (arrested packings, whose η_r is not a target); ``contacts``: per
+    snapshot the recorded contact states (pairs, states, stretches) of a rheograph trajectory, else None;
+    ``position_noise`` [a]: the stated precision of the positions, RMS per coordinate (0 for exact
+    simulator output; None where a bare file or a caller does not state it)."""
+
+    source: str
+    kind: str
+    positions: np.ndarray
+    radii: np.ndarray
+    lx: float
+    ly: float
+    le_offset: np.ndarray
+    strain: np.ndarray
+    stress: float
+    phi: float
+    params: dict
+    targets: np.ndarray
+    jammed: np.ndarray
+    numerics: dict = field(default_factory=dict)
+    contacts: list | None = None
+    position_noise: float | None = 0.0
+    status: str = ""
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.radii.size)
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    def graph_params(self) -> dict:
+        """The parameter mapping graph features and the one-solve read: physical parameters, the state
+        point and N (``rheograph.graphs.features``)."""
+        return {**self.params, "stress": self.stress, "phi": self.phi, "n_particles": self.n_particles}
+
+    def missing_params(self, names=PHYSICAL_PARAMS) -> list[str]:
+        return [name for name in names if name not in self.params]
+
+
+def wrap_into_box(positions: np.ndarray, lx: float, ly: float, le_offset: float) -> np.ndarray:
+    """Positions (N, 2) [a], anywhere, mapped into [-Lx/2, Lx/2) x [-Ly/2, Ly/2): each crossing of the
+    top (bottom) boundary shifts x by -(+) le_offset, as the Lees–Edwards images do."""
+    out = np.array(positions, dtype=np.float64)
+    images = np.floor(out[:, 1] / ly + 0.5)
+    out[:, 1] -= images * ly
+    out[:, 0] -= images * le_offset
+    out[:, 0] -= lx * np.floor(out[:, 0] / lx + 0.5)
+    return out
+
+
+def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generator) -> np.ndarray:
+    """Snapshot ``k``'s positions (N, 2) [a] plus Gaussian noise of ``eps`` [a] per coordinate drawn from
+    ``rng``, wrapped into the box (an imaging-grade copy of it)."""
+    return wrap_into_box(
+        snaps.positions[k] + rng.normal(0.0, eps, snaps.positions[k].shape),
+        snaps.lx,
+        snaps.ly,
+        snaps.le_offset[k],
+    )
+
+
+def area_fraction(radii, lx: float, ly: float) -> float:
+    with np.errstate(over="ignore"):  # radii of a damaged file: inf, refused by the caller's check
+        return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
+
+
+def check_geometry(where: str, radii, lx, ly, phi) -> None:
+    """Radii in units of the small radius, a positive box, and the stated φ equal to the one the radii
+    and box give (to 1e-3: files round it)."""
+    radii = np.asarray(radii, dtype=np.float64)
+    if radii.ndim != 1 or radii.size < 2 or not np.all(np.isfinite(radii)) or radii.min() <= 0:
+        raise InputError(f"{where}: radii must be (N,) positive numbers, N >= 2")
+    if not math.isclose(float(radii.min()), 1.0, rel_tol=1e-6):
+        raise InputError(
+            f"{where}: lengths must be in units of the small radius a (smallest radius 1, found "
+            f"{radii.min():.6g}): divide positions, radii, box and le_offset by it"
+        )
+    if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
+        raise InputError(f"{where}: box must be two positive lengths (Lx, Ly) [a], found ({lx}, {ly})")
+    measured = area_fraction(radii, lx, ly)
+    if not math.isclose(measured, phi, abs_tol=1e-3):
+        raise InputError(
+            f"{where}: phi = {phi:g} but the radii and box give an area fraction {measured:.6g}: check the "
+            "box (Lx, Ly) and the radii's units"
+        )
+
+
+def check_configurations(where: str, positions, radii, le_offset, strain, targets) -> None:
+    """Positions (S, N, 2) [a] and offsets (S,) [a] finite, with N the radii's; strain (S,) and targets
+    (S, 3) finite or NaN (unknown), never infinite: what a damaged file gives otherwise."""
+    n_snap = len(positions)
+    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
+        raise InputError(
+            f"{where}: positions must be (S, N, 2) with N = {radii.size} (the radii), found {positions.shape}"
+        )
+    if not np.all(np.isfinite(positions)):
+        raise InputError(f"{where}: positions contain non-finite values")
+    if le_offset.shape != (n_snap,) or not np.all(np.isfinite(le_offset)):
+        raise InputError(f"{where}: le_offset must be ({n_snap},) finite numbers, one per snapshot")
+    if strain.shape != (n_snap,) or targets.shape != (n_snap, 3):
+        raise InputError(f"{where}: the strain and the targets need one value per snapshot ({n_snap})")
+    if np.isinf(strain).any() or np.isinf(targets).any():
+        raise InputError(f"{where}: the strain or the targets contain infinite values")
+
+
+def size_ratio(radii) -> float:
+    return round(float(np.max(radii) / np.min(radii)), 6)
