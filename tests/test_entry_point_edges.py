@@ -158,7 +158,10 @@ def test_a_rejected_job_of_a_sweep_leaves_no_run_directory(tmp_path):
     assert [p.name for p in (out / "multirun").iterdir()] == ["multirun.yaml"]
 
 
-@pytest.mark.parametrize("value,shown", [("-1", "-1"), ("abc", "'abc'")])
+@pytest.mark.parametrize(
+    "value,shown",
+    [("-1", "-1"), pytest.param("abc", "'abc'", marks=pytest.mark.slow)],  # 5 s each: tune.py in a process
+)
 def test_tune_n_trials_is_checked_before_any_state_is_created(tmp_path, value, shown):
     """Neither clipped to 0 without a word (-1) nor a traceback once the study database exists (abc)."""
     out = tmp_path / "out"

@@ -159,10 +159,11 @@ def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp
         ("train.py", "model=resgcnn", ["model/resgcnn", "resgcn, resgcn_physics"]),
         ("simulate.py", "sim.phi=[1,2", ["sim.phi=[1,2:"]),
         ("simulate.py", "--cfg=hydra -m", ["Only one of --run, --multirun, --cfg"]),
-        (
+        pytest.param(
             "tune.py",
             "train_overrides=['data.phii=0.7']",
             ["tune.train_overrides: data.phii: no such setting"],
+            marks=pytest.mark.slow,  # 7-11 s: a study's composition of every trial's overrides
         ),
     ],
 )
@@ -418,6 +419,7 @@ def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tm
     assert [f["fold"] for f in folds] == [0, 1, 2]
 
 
+@pytest.mark.slow  # 7 s; test_tune_with_bad_fixed_overrides_stops_before_the_first_trial covers the same path
 def test_tune_with_a_bad_fixed_model_option_stops_before_the_first_trial(tmp_path, tiny_files):
     overrides = [*tiny_training_overrides(tiny_files, tmp_path), "model.aggr=sum"]
     code, out = run(
@@ -457,6 +459,7 @@ def test_a_write_finding_no_room_ends_any_entry_point_with_one_line():
             raise FileNotFoundError(errno.ENOENT, "No such file or directory", "/runs/x")
 
 
+@pytest.mark.slow  # 8 s: an Optuna storage connection attempt
 def test_tune_with_a_bad_storage_url_is_one_line(tmp_path):
     code, out = run([str(ROOT / "tune.py"), "tune.storage=notadb://x", f"output_root={tmp_path}"], tmp_path)
     assert_one_line_error(code, out, "tune.py: error:", "tune.storage='notadb://x'", "database URL")
