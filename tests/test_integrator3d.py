@@ -223,3 +223,34 @@ def test_dilute_3d_suspension_has_the_solvent_viscosity_and_no_pressure():
     res = sim.step(record=True)
     assert viscosity(res) == pytest.approx(1.0, rel=1e-12)
     assert particle_pressure(res.stress) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_the_step_moves_by_velocity_times_dt_with_dt_from_the_largest_speed(sheared):
+    """Explicit Euler: each sphere moves by (U + rate y e_x) dt (through the wrap), and dt = disp_max /
+    max(|U|, pair approach and contact sliding speeds, rate), recomputed here from the velocities.  The
+    total momentum sum a_i U_i vanishes (pair forces cancel, uniform Stokes drag coefficient)."""
+    sim = clone(sheared, integrator="euler")
+    before = sim.state.positions.copy()
+    lp = clone(sim).linear_problem()
+    res = sim.step()
+    u = sim.velocity.reshape(-1, 6)
+    s = sim.state
+    rate = res.shear_rate
+    moved = s.positions - before
+    expected = (u[:, :3] + np.outer(rate * before[:, 1], [1.0, 0.0, 0.0])) * res.dt
+    # undo the periodic wrap: multiples of the box (and the Lees–Edwards shift across y)
+    crossed_y = np.round((moved[:, 1] - expected[:, 1]) / s.ly)
+    moved[:, 0] += crossed_y * s.le_offset
+    moved -= np.round((moved - expected) / [s.lx, s.ly, s.lz]) * [s.lx, s.ly, s.lz]
+    np.testing.assert_allclose(moved, expected, atol=1e-12)
+    assert np.abs(u[:, 2]).max() > 1e-3 * np.abs(u[:, :3]).max()  # out-of-plane motion is exercised
+    speeds = [np.linalg.norm(u[:, :3], axis=1).max(), abs(rate)]
+    for k in np.flatnonzero(lp.active):
+        i, j = s.pair_i[k], s.pair_j[k]
+        rel = u[j, :3] - u[i, :3] + np.array([rate * lp.dy[k], 0.0, 0.0])
+        speeds.append(abs(rel @ lp.nvec[k]))
+        if sim.state.contact_state[k] != contacts3d.NONE:
+            speeds.append(np.linalg.norm(contacts3d.sliding_velocity(sim.velocity, s.radii, s.pair_i, s.pair_j,
+                                                                     lp.nvec, lp.dy, rate, k)))  # fmt: skip
+    assert res.dt == pytest.approx(sim.params.disp_max / max(speeds), rel=1e-12)
+    np.testing.assert_allclose(s.radii @ u[:, :3], 0.0, atol=1e-10 * np.abs(u[:, :3]).max())
