@@ -76,7 +76,8 @@ def test_spring_forces_obey_newton_and_the_angular_momentum_balance():
 @pytest.mark.parametrize("overlap", [0.0, 0.01])
 def test_sliding_velocity_of_rigid_motion_and_of_a_tangential_slide(overlap):
     """A rigidly moving pair (translation + rotation Omega about any point) slides at -overlap Omega x n
-    (zero when just touching); j translating along a tangent t slides at that velocity."""
+    (zero when just touching); j translating along a tangent t slides at that velocity, and the stretch
+    grows by it times dt."""
     r = 2.4 - overlap
     x_i = np.array([0.5, -0.2, 0.1])
     x_j = x_i + r * N0
@@ -90,6 +91,11 @@ def test_sliding_velocity_of_rigid_motion_and_of_a_tangential_slide(overlap):
     slide = np.r_[np.zeros(6), 0.8 * t + 0.5 * N0, np.zeros(3)]  # the normal part does not slide
     v = np.array(contacts3d.sliding_velocity(slide, RADII, PI, PJ, N0[None, :], dy, 0.0, 0))
     np.testing.assert_allclose(v, 0.8 * t, atol=1e-14)
+    stretch = np.zeros((1, 3))  # the step integrates that velocity into the stretch
+    contacts3d.increment_stretch(
+        slide, RADII, PI, PJ, N0[None, :], dy, np.array([STICK], np.int8), stretch, 0.0, 0.01
+    )
+    np.testing.assert_allclose(stretch[0], 0.008 * t, atol=1e-16)
 
 
 def test_one_projection_after_a_rigid_rotation_scales_the_rolling_component_by_cos_theta():
