@@ -1,9 +1,10 @@
 """Sparse resistance matrix R_FU in upper-triangular CSC form, assembled straight into its data array.
 
-Degrees of freedom: 3 per particle, ordered [Ux_0, Uy_0, w_0, Ux_1, ...].  The sparsity pattern holds the
-3x3 diagonal blocks (upper part) and one 3x3 block (rows of i, columns of j) for every candidate pair i < j
-of the neighbour list; candidate pairs that do not interact this step hold explicit zeros, so the pattern
-(and the symbolic factorisation) survives until the neighbour list is rebuilt.
+Degrees of freedom: 3 per particle, ordered [Ux_0, Uy_0, w_0, Ux_1, ...] (``assembly3d`` uses the same
+pattern with 6).  The sparsity pattern holds the 3x3 diagonal blocks (upper part) and one 3x3 block (rows
+of i, columns of j) for every candidate pair i < j of the neighbour list; candidate pairs that do not
+interact this step hold explicit zeros, so the pattern (and the symbolic factorisation) survives until
+the neighbour list is rebuilt.
 """
 
 import numpy as np
@@ -13,40 +14,41 @@ from rheograph.sim.lubrication import contact_block, pair_block, strain_force
 
 
 @njit(cache=True)
-def build_pattern(pair_i, pair_j, n_particles):
+def build_pattern(pair_i, pair_j, n_particles, block=3):
     """CSC pattern (indptr, indices) of the upper triangle and, per pair, the slot of its block in a column.
 
-    Pairs must be sorted by (j, i).  For pair p = (i, j) the entry (3i + r, 3j + q) lives at
-    ``indptr[3j + q] + pair_slot[p] + r``; particle j's diagonal entry (3j + r, 3j + q), r <= q, lives at
-    ``indptr[3j + q] + diag_slot[j] + r``.
+    ``block`` is the number of degrees of freedom per particle (3 in 2D, 6 in 3D).  Pairs must be sorted
+    by (j, i).  For pair p = (i, j) the entry (b i + r, b j + q) lives at ``indptr[b j + q] + pair_slot[p]
+    + r``; particle j's diagonal entry (b j + r, b j + q), r <= q, lives at ``indptr[b j + q] +
+    diag_slot[j] + r``.
     """
-    ndof = 3 * n_particles
+    ndof = block * n_particles
     count = np.zeros(n_particles, dtype=np.int64)
     npair = pair_i.shape[0]
     pair_slot = np.empty(npair, dtype=np.int64)
     for p in range(npair):
         j = pair_j[p]
-        pair_slot[p] = 3 * count[j]
+        pair_slot[p] = block * count[j]
         count[j] += 1
     indptr = np.empty(ndof + 1, dtype=np.int64)
     indptr[0] = 0
     for j in range(n_particles):
-        for q in range(3):
-            indptr[3 * j + q + 1] = indptr[3 * j + q] + 3 * count[j] + q + 1
+        for q in range(block):
+            indptr[block * j + q + 1] = indptr[block * j + q] + block * count[j] + q + 1
     indices = np.empty(indptr[ndof], dtype=np.int64)
-    diag_slot = 3 * count
+    diag_slot = block * count
     for p in range(npair):
         i = pair_i[p]
         j = pair_j[p]
-        for q in range(3):
-            base = indptr[3 * j + q] + pair_slot[p]
-            for r in range(3):
-                indices[base + r] = 3 * i + r
+        for q in range(block):
+            base = indptr[block * j + q] + pair_slot[p]
+            for r in range(block):
+                indices[base + r] = block * i + r
     for j in range(n_particles):
-        for q in range(3):
-            base = indptr[3 * j + q] + diag_slot[j]
+        for q in range(block):
+            base = indptr[block * j + q] + diag_slot[j]
             for r in range(q + 1):
-                indices[base + r] = 3 * j + r
+                indices[base + r] = block * j + r
     return indptr, indices.astype(np.int32), pair_slot, diag_slot
 
 

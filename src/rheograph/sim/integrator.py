@@ -96,16 +96,16 @@ class StepResult:
 
 @njit(cache=True)
 def _transfer_contacts(old_i, old_j, old_stretch, old_state, new_i, new_j, n):
-    """Carry stretch and contact state from an old to a new neighbour list (both sorted by (j, i))."""
-    new_stretch = np.zeros((new_i.shape[0], 2))
+    """Carry stretch (P, 2 in 2D or 3 in 3D) and contact state from an old to a new neighbour list (both
+    sorted by (j, i))."""
+    new_stretch = np.zeros((new_i.shape[0], old_stretch.shape[1]))
     new_state = np.zeros(new_i.shape[0], dtype=np.int8)
     old_key = old_j * n + old_i
     for p in range(new_i.shape[0]):
         key = new_j[p] * n + new_i[p]
         k = np.searchsorted(old_key, key)
         if k < old_key.shape[0] and old_key[k] == key:
-            new_stretch[p, 0] = old_stretch[k, 0]
-            new_stretch[p, 1] = old_stretch[k, 1]
+            new_stretch[p, :] = old_stretch[k, :]
             new_state[p] = old_state[k]
     return new_stretch, new_state
 

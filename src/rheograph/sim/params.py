@@ -39,6 +39,11 @@ class SimParams:
     Units: length a (small radius), force F_CL, stress sigma0 = F_CL/(6 pi a^2), time 6 pi eta0 a^2 / F_CL.
     """
 
+    # plain class attributes (not fields): what a 3D subclass (``params3d.SimParams3D``) changes
+    DIM = 2  # space dimension: the box is a square, phi an area fraction
+    PHI_RULE = "0 < phi <= 0.86"
+    PHI_MAX = 0.86  # ~ random close packing of this bidisperse mixture: no overlap-free start above
+
     n_particles: int = 400  # total particle count N (bidisperse, equal area of each species)
     phi: float = 0.76  # area fraction sum(pi a_i^2) / (Lx Ly)
     stress: float = 10.0  # imposed shear stress sigma / sigma0
@@ -132,8 +137,7 @@ class SimParams:
             if not ok:
                 raise ParameterError(f"sim.{name}={value!r} is invalid: allowed {allowed}")
 
-        # above ~0.84 (random close packing of this bidisperse mixture) no overlap-free start exists
-        check("phi", 0.0 < self.phi <= 0.86, "0 < phi <= 0.86")
+        check("phi", 0.0 < self.phi <= self.PHI_MAX, self.PHI_RULE)
         check("stress", self.stress > 0.0, "stress > 0 (in units of sigma0)")
         check("size_ratio", 1.0 <= self.size_ratio <= 10.0, "1 <= size_ratio <= 10")
         check("strain", self.strain > 0.0, "strain > 0")
@@ -163,7 +167,7 @@ class SimParams:
         # the minimum image must be unique for the longest interaction (two large particles + gap + skin)
         cutoff = 2.0 * self.size_ratio * (1.0 + 0.5 * self.lub_max_gap) + self.neighbour_skin
         if self.box_length() < 2.0 * cutoff:
-            n_min = math.ceil(self.n_particles * (2.0 * cutoff / self.box_length()) ** 2)
+            n_min = math.ceil(self.n_particles * (2.0 * cutoff / self.box_length()) ** self.DIM)
             raise ParameterError(
                 f"sim.n_particles={self.n_particles} is too small for the interaction cut-off at "
                 f"phi={self.phi}: the box (L={self.box_length():.2f}) must be at least twice the cut-off "

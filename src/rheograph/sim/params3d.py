@@ -1,0 +1,57 @@
+"""Parameters of a 3D state point: the 2D ``SimParams`` with a cubic box, volume fractions and a choice
+of stress or rate control.
+
+Units as in 2D: length a (small radius), force F_CL, stress sigma0 = F_CL/(6 pi a^2), time
+6 pi eta0 a^2 / F_CL, shear rate gamma0_dot = F_CL / (6 pi eta0 a^2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rheograph.sim.params import ParameterError, SimParams
+
+CONTROLS = ("stress", "rate")
+
+
+@dataclass(frozen=True)
+class SimParams3D(SimParams):
+    """A 3D state point: N spheres, bidisperse 1 : ``size_ratio`` with equal volume of each species, in a
+    cube at volume fraction ``phi``.
+
+    ``control="stress"`` imposes sigma_xy = ``stress`` (sigma0) and solves for the shear rate each step;
+    ``control="rate"`` imposes ``shear_rate`` (gamma0_dot).  The spring stiffness is scaled by ``stress``
+    in both (k_n = kn_coefficient * stress / (6 pi)): under rate control ``stress`` sets only that scale,
+    and should be near the stress the rate produces so that overlaps stay ~1e-2 a.
+    """
+
+    DIM = 3
+    # O'Hern, Silbert, Liu & Nagel (PRE 68, 011306, 2003) find frictionless jamming of 1 : 1.4 bidisperse
+    # spheres at phi_J = 0.639 (random close packing): there is no overlap-free random start above it
+    PHI_MAX = 0.64
+    PHI_RULE = "0 < phi <= 0.64 (random close packing of spheres)"
+
+    phi: float = 0.55  # volume fraction sum(4 pi a_i^3 / 3) / (Lx Ly Lz)
+    control: str = "stress"  # "stress" (imposed sigma_xy) or "rate" (imposed shear rate)
+    shear_rate: float = 1.0  # imposed shear rate under rate control [gamma0_dot]; unused under stress
+
+    def species_counts(self) -> tuple[int, int]:
+        """(n_small, n_large) with equal volume of each species: n_s = size_ratio^3 n_l."""
+        n_large = round(self.n_particles / (1.0 + self.size_ratio**3))
+        return self.n_particles - n_large, n_large
+
+    def box_length(self) -> float:
+        """Edge of the cubic box [a]."""
+        n_small, n_large = self.species_counts()
+        volume = 4.0 * math.pi / 3.0 * (n_small + n_large * self.size_ratio**3)
+        return (volume / self.phi) ** (1.0 / 3.0)
+
+    def validate(self) -> None:
+        super().validate()
+        if self.control not in CONTROLS:
+            raise ParameterError(f"sim.control={self.control!r} is invalid: allowed one of {CONTROLS}")
+        if not (math.isfinite(self.shear_rate) and self.shear_rate > 0.0):
+            raise ParameterError(
+                f"sim.shear_rate={self.shear_rate!r} is invalid: allowed shear_rate > 0 (gamma0_dot)"
+            )
