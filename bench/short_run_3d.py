@@ -61,9 +61,7 @@ def main(argv=None) -> None:
         f"N={args.n} phi={args.phi} sigma/sigma0={args.stress} {args.integrator} disp_max={args.disp_max} "
         f"box={sim.state.lx:.3f} start {start:.1f} s"
     )
-    print(
-        f"strain {strain0:.3f} -> {sim.state.strain:.3f} in {args.steps} steps after {args.warmup} warm-up"
-    )
+    print(f"strain {strain0:.3f} -> {sim.state.strain:.3f} in {args.steps} steps after {args.warmup} warm-up")
     print(
         f"eta_r = {eta:.3f}  Pi/sigma = {np.mean(pressures) / args.stress:.4f}  Z = {np.mean(z):.3f}  "
         f"Z_mu = {np.mean(z_mu):.3f}"

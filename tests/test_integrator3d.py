@@ -250,7 +250,9 @@ def test_the_step_moves_by_velocity_times_dt_with_dt_from_the_largest_speed(shea
         rel = u[j, :3] - u[i, :3] + np.array([rate * lp.dy[k], 0.0, 0.0])
         speeds.append(abs(rel @ lp.nvec[k]))
         if sim.state.contact_state[k] != contacts3d.NONE:
-            speeds.append(np.linalg.norm(contacts3d.sliding_velocity(sim.velocity, s.radii, s.pair_i, s.pair_j,
-                                                                     lp.nvec, lp.dy, rate, k)))  # fmt: skip
+            sliding = contacts3d.sliding_velocity(
+                sim.velocity, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, rate, k
+            )
+            speeds.append(np.linalg.norm(sliding))
     assert res.dt == pytest.approx(sim.params.disp_max / max(speeds), rel=1e-12)
     np.testing.assert_allclose(s.radii @ u[:, :3], 0.0, atol=1e-10 * np.abs(u[:, :3]).max())
