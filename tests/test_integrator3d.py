@@ -14,6 +14,10 @@ from rheograph.sim.lubrication3d import pair_block, strain_force
 from rheograph.sim.params3d import SimParams3D
 from rheograph.sim.stress3d import add_lubrication_stresslet
 
+# 25-40 s from a cold numba cache (the 3D step compiles whole): with the long tests in CI; the 3D kernels'
+# own tests (lubrication3d, contacts3d, geometry3d) run by default
+pytestmark = pytest.mark.slow
+
 E_UNIT = np.array([[0.0, 0.5, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])
 
 
