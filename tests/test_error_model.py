@@ -73,3 +73,16 @@ def test_jammed_viscosities_and_sparse_state_points_are_left_out():
     # the missing bar is filled from the neighbour in log sigma (constant beyond the last known point)
     assert predicted_error(model, [50.0], [0.76])[0, 0] == pytest.approx(model["rms"]["eta"][1])
     assert np.all(np.isnan(error_scale(np.array([0.0, -1.0]), "eta")))
+
+
+def test_error_bounds_are_a_factor_on_the_log_targets_and_a_difference_on_z_mu():
+    """The bar of η_r and Π is in log10 units: the truth 10^±err away from a prediction lies on the
+    bounds; a prediction that is not positive has none (a factor cannot bound it), never a sign flip."""
+    from rheograph.learn.error_model import error_bounds
+
+    lower, upper = error_bounds("eta", np.array([100.0, 2.0, -1.0]), np.array([0.1, 0.3, 0.1]))
+    np.testing.assert_allclose(lower[:2], [100.0 / 10**0.1, 2.0 / 10**0.3])
+    np.testing.assert_allclose(upper[:2], [100.0 * 10**0.1, 2.0 * 10**0.3])
+    assert np.isnan(lower[2]) and np.isnan(upper[2])
+    lower, upper = error_bounds("z_mu", np.array([2.5]), np.array([0.05]))
+    np.testing.assert_allclose([lower[0], upper[0]], [2.45, 2.55])

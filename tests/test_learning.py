@@ -382,6 +382,14 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
     for k, name in enumerate(("eta", "pressure", "z_mu")):
         np.testing.assert_allclose(with_bars[f"{name}_pred_err"], expected[:, k])
         assert np.all(with_bars[f"{name}_pred_err"] > 0)
+        # the bar in the target's own units: a factor 10^err either side on the log targets, ± err on Z_mu
+        pred, lower, upper = (with_bars[f"{name}_pred{s}"] for s in ("", "_lower", "_upper"))
+        if name == "z_mu":
+            np.testing.assert_allclose(upper - pred, expected[:, k])
+            np.testing.assert_allclose(pred - lower, expected[:, k])
+        else:
+            np.testing.assert_allclose(np.log10(upper / pred), expected[:, k], rtol=1e-6)
+            np.testing.assert_allclose(np.log10(pred / lower), expected[:, k], rtol=1e-6)
     # a state point of the training range is in the domain; phi = 0.76 at sigma = 400 is not, and says so
     assert result["in_domain"].mean() > 0.5
     from rheograph.runner import run_state_point

@@ -85,6 +85,20 @@ def predicted_error(model: dict, stress, phi) -> np.ndarray:
     return out
 
 
+def error_bounds(name: str, prediction, error) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of one target in its physical units: a factor 10^error either side of the
+    prediction for η_r and Π (whose bar is in log10 units; NaN where the prediction is not positive, as
+    a factor cannot bound it), ± error for Z_μ."""
+    prediction, error = np.asarray(prediction, float), np.asarray(error, float)
+    if name not in LOG_TARGETS:
+        return prediction - error, prediction + error
+    factor = 10.0**error
+    positive = prediction > 0
+    lower = np.where(positive, prediction / factor, np.nan)
+    upper = np.where(positive, prediction * factor, np.nan)
+    return lower, upper
+
+
 def write_error_model(run_dir: Path, model: dict) -> Path:
     path = Path(run_dir) / FILENAME
     path.write_text(json.dumps(model, indent=1))

@@ -26,13 +26,15 @@ One row per snapshot.  Columns: ``source``, ``snapshot`` (index in its source), 
 was trained on), ``notes`` (why not, and any accepted mismatch); per target ``*_pred`` (ensemble mean),
 ``*_pred_std`` (spread over the fold models: flags disagreement, too narrow to be an error bar),
 ``*_pred_err`` (the cross-validated error bar of the model's ``error_model.json``: one RMS of held-out
-residuals, log10 units for η_r and Π — the truth lies within pred × 10^(±err) about 68 % of the time —
-absolute for Z_μ) and ``*_sim`` (the source's own value, NaN where it has none); the physics-only
-values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed stress; NaN, with
-the reason in ``notes``, where that solve's shear rate vanishes or runs against the stress),
-``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and ``z_mu_counted`` (the
-CLM's frictional contacts counted); ``jammed_fraction``: the
-share of training trajectories at the nearest trained state point that shear-jammed
+residuals at the snapshot's state point, log10 units for η_r and Π, absolute for Z_μ), ``*_pred_lower``
+and ``*_pred_upper`` (the bar in the target's own units: pred × 10^(∓err) for η_r and Π, pred ∓ err for
+Z_μ; on a seed no model had seen they held 78 % of η_r, 74 % of Π and 92 % of Z_μ, docs/benchmarks.md
+"How reliable are its error bars") and ``*_sim`` (the source's own value, NaN where it has none);
+the physics-only values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed
+stress; NaN, with the reason in ``notes``, where that solve's shear rate vanishes or runs against the
+stress), ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and
+``z_mu_counted`` (the CLM's frictional contacts counted); ``jammed_fraction``: the share of training
+trajectories at the nearest trained state point that shear-jammed
 (rheograph.learn.jamming; jammed when >= 0.5).
 """
 
@@ -54,7 +56,7 @@ from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_gra
 from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values
 from rheograph.learn.bundle import load_bundle, predict_dataset
-from rheograph.learn.error_model import predicted_error, read_error_model
+from rheograph.learn.error_model import error_bounds, predicted_error, read_error_model
 from rheograph.learn.jamming import jammed_fraction
 from rheograph.learn.module import TARGET_NAMES
 from rheograph.learn.registry import list_models, model_paths, read_card
@@ -411,6 +413,9 @@ class Surrogate:
             out[f"{name}_pred"], out[f"{name}_pred_std"] = ensemble_mean_std(preds[:, :, k])
             if errors is not None:
                 out[f"{name}_pred_err"] = errors[:, k]
+                out[f"{name}_pred_lower"], out[f"{name}_pred_upper"] = error_bounds(
+                    name, out[f"{name}_pred"], errors[:, k]
+                )
             out[f"{name}_sim"] = true[:, k]
         return out
 
