@@ -70,22 +70,22 @@ cards: install
 	$(PY) -m rheograph.dataset_card data/paper --out docs
 	$(PY) -m rheograph.dataset_card data/jamming --out docs/datasets/jamming \
 	    --title "Dataset card: runs near jamming" \
-	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \
-	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.82,0.83,0.835 sim.seed=1,2" \
-	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.84 sim.relax_tolerance=3e-3 sim.seed=1,2" \
-	    --command "python simulate.py -m experiment=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.845 sim.relax_tolerance=2e-2 sim.seed=1,2" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1   # phi 0.79" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.785,0.795 sim.seed=1,2,3,4,5,6" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.79 sim.seed=4,5,6" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.7875 sim.seed=1,2,3" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.81 sim.seed=1" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.78,0.79 sim.seed=1,2" \
-	    --command "python simulate.py -m experiment=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.795 sim.seed=1"
+	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \
+	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.82,0.83,0.835 sim.seed=1,2" \
+	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.84 sim.relax_tolerance=3e-3 sim.seed=1,2" \
+	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.845 sim.relax_tolerance=2e-2 sim.seed=1,2" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1   # phi 0.79" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.785,0.795 sim.seed=1,2,3,4,5,6" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.79 sim.seed=4,5,6" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.phi=0.7875 sim.seed=1,2,3" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.81 sim.seed=1" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.78,0.79 sim.seed=1,2" \
+	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.795 sim.seed=1"
 	$(PY) -m rheograph.dataset_card data/large_n --out docs/datasets/large_n \
 	    --title "Dataset card: large systems" \
-	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1 sim.n_particles=400,2000   # phi 0.76" \
-	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1   # N = 8000" \
-	    --command "python simulate.py -m experiment=large_n hydra.launcher.n_jobs=1 sim.n_particles=20000" \
-	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1   # phi 0.80, N = 8000" \
-	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1 sim.stress=20 sim.seed=2" \
-	    --command "python simulate.py -m experiment=large_n_jamming hydra.launcher.n_jobs=1 sim.n_particles=20000 sim.stress=20"
+	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1 sim.n_particles=400,2000   # phi 0.76" \
+	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1   # N = 8000" \
+	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1 sim.n_particles=20000" \
+	    --command "python simulate.py -m campaign=large_n_jamming hydra.launcher.n_jobs=1   # phi 0.80, N = 8000" \
+	    --command "python simulate.py -m campaign=large_n_jamming hydra.launcher.n_jobs=1 sim.stress=20 sim.seed=2" \
+	    --command "python simulate.py -m campaign=large_n_jamming hydra.launcher.n_jobs=1 sim.n_particles=20000 sim.stress=20"

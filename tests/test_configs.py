@@ -1,5 +1,6 @@
-"""Every experiment config composes, and the dataset experiments sweep only valid state points with the
-converged step of their area fraction (docs/benchmarks.md §2)."""
+"""Every simulation campaign sweeps only valid state points (the datasets' at the converged step of their
+area fraction, docs/benchmarks.md §2), every training experiment composes and runs, and neither group
+is accepted by the other entry point."""
 
 import dataclasses
 import itertools
@@ -15,14 +16,15 @@ from rheograph.errors import InputError
 from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
+CAMPAIGNS = sorted(p.stem for p in (ROOT / "conf" / "campaign").glob("*.yaml"))
 EXPERIMENTS = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("*.yaml"))
 
 
 def sweep(name: str):
     register_resolvers()
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="simulate", overrides=[f"experiment={name}"], return_hydra_config=True)
-    params = {k: str(v).split(",") for k, v in cfg.hydra.sweeper.params.items()}
+        cfg = compose(config_name="simulate", overrides=[f"campaign={name}"], return_hydra_config=True)
+    params = {k: str(v).split(",") for k, v in cfg.hydra.sweeper.params.items() if k.startswith("sim.")}
     for values in itertools.product(*params.values()):
         sim = OmegaConf.to_container(cfg.sim, resolve=True)
         sim.update({k.removeprefix("sim."): float(v) for k, v in zip(params, values)})
@@ -30,17 +32,49 @@ def sweep(name: str):
         yield SimParams.from_mapping(sim)
 
 
-@pytest.mark.parametrize("name", [e for e in EXPERIMENTS if e.startswith("dataset_")])
-def test_dataset_experiments_sweep_valid_state_points_at_the_converged_step(name):
-    points = list(sweep(name))
+def test_the_two_groups_hold_what_their_entry_point_runs():
+    """Campaigns configure simulations (``sim``), experiments training (``data``, ``model``, ...)."""
+    assert len(CAMPAIGNS) >= 10 and len(EXPERIMENTS) >= 10
+    for name in CAMPAIGNS:
+        text = (ROOT / "conf" / "campaign" / f"{name}.yaml").read_text()
+        assert "\nsim:" in text or "sim." in text, name
+        assert "\nmodel:" not in text and "\ndata:" not in text, name
+    for name in EXPERIMENTS:
+        text = (ROOT / "conf" / "experiment" / f"{name}.yaml").read_text()
+        assert "\nsim:" not in text, name
+
+
+@pytest.mark.parametrize(
+    "config, override, group",
+    [("simulate", "experiment=demo", "experiment"), ("train", "campaign=large_n", "campaign")],
+)
+def test_an_entry_point_refuses_the_other_ones_group(config, override, group):
+    from hydra.errors import ConfigCompositionException
+
+    from rheograph.errors import hydra_error_line
+
+    register_resolvers()
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        with pytest.raises(ConfigCompositionException, match=group) as refused:
+            compose(config_name=config, overrides=[override])
+    # the one line the entry point prints names the group's owner, not Hydra's advice to append it with +
+    line = hydra_error_line(refused.value)
+    owner = {"experiment": "train.py", "campaign": "simulate.py"}[group]
+    assert line.startswith(f"{group}=...") and f"belong to {owner}" in line and "+" not in line
+
+
+@pytest.mark.parametrize("name", CAMPAIGNS)
+def test_campaigns_sweep_valid_state_points(name):
+    points = list(sweep(name))  # SimParams.from_mapping refuses an invalid one
     assert points
-    for p in points:
-        assert p.integrator == "implicit"
-        # phi = 0.80 needs 1e-3 (2e-3 slides spuriously near jamming); below, 2e-3 is converged
-        assert p.disp_max == (1e-3 if p.phi == pytest.approx(0.80) else 2e-3), (name, p.phi)
+    if name.startswith("dataset_"):
+        for p in points:
+            assert p.integrator == "implicit"
+            # phi = 0.80 needs 1e-3 (2e-3 slides spuriously near jamming); below, 2e-3 is converged
+            assert p.disp_max == (1e-3 if p.phi == pytest.approx(0.80) else 2e-3), (name, p.phi)
 
 
-@pytest.mark.parametrize("name", [e for e in EXPERIMENTS if not e.startswith("dataset_")])
+@pytest.mark.parametrize("name", EXPERIMENTS)
 def test_training_experiments_compose(name, tiny_files):
     """Every training experiment composes, passes the run checks, and its graph and model options build
     and run: the graphs of a tiny run with the experiment's features go through its model to one finite

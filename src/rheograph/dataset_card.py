@@ -34,11 +34,11 @@ from rheograph.sim.params import SimParams
 TARGETS = ("viscosity", "pressure", "z_mu")
 # what regenerates the committed paper-scale set (data/paper), quoted in its card
 PAPER_SET_COMMANDS = (
-    "python simulate.py -m experiment=dataset_paper_n400_phi070_074      # N = 400, phi 0.70-0.74",
-    "python simulate.py -m experiment=dataset_paper_n400                 # N = 400, phi 0.76, 0.78",
-    "python simulate.py -m experiment=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)",
-    "python simulate.py -m experiment=dataset_paper_n2000 sim.phi=0.70,0.76   # N = 2000, two seeds",
-    "python simulate.py -m experiment=dataset_paper_phi080 sim.n_particles=2000 sim.seed=1,2"
+    "python simulate.py -m campaign=dataset_paper_n400_phi070_074      # N = 400, phi 0.70-0.74",
+    "python simulate.py -m campaign=dataset_paper_n400                 # N = 400, phi 0.76, 0.78",
+    "python simulate.py -m campaign=dataset_paper_phi080               # N = 400, phi 0.80 (1e-3)",
+    "python simulate.py -m campaign=dataset_paper_n2000 sim.phi=0.70,0.76   # N = 2000, two seeds",
+    "python simulate.py -m campaign=dataset_paper_phi080 sim.n_particles=2000 sim.seed=1,2"
     "   # N = 2000, phi 0.80",
 )
 

@@ -6,6 +6,7 @@ import errno
 import logging
 import multiprocessing
 import os
+import re
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -93,6 +94,13 @@ def wants_traceback() -> bool:
     return os.environ.get("HYDRA_FULL_ERROR") == "1"
 
 
+# config groups that only one entry point composes: (what they hold, who runs them, what the other takes)
+GROUP_OWNERS = {
+    "experiment": ("training experiments", "train.py", "campaign=<name> (conf/campaign/) for simulations"),
+    "campaign": ("simulation campaigns", "simulate.py", "experiment=<name> (conf/experiment/) for training"),
+}
+
+
 def hydra_error_line(exc: Exception) -> str:
     """One line for what Hydra or OmegaConf refused while composing a configuration from the command line:
     an unknown key (with the closest known ones), an unknown config option (with the options), or the
@@ -113,6 +121,13 @@ def hydra_error_line(exc: Exception) -> str:
         prefix = full_key[: -len(str(key))]
         hint = f"did you mean {' or '.join(prefix + c for c in close)}? " if close else ""
         return f"{full_key}: no such setting; {hint}`--cfg job` prints every setting of a command"
+    wrong_group = re.match(r"Could not override '(experiment|campaign)'\. No match in the defaults", str(exc))
+    if wrong_group:  # Hydra's advice (append with +) would compose a simulation with a training config
+        group = wrong_group.group(1)
+        return (
+            f"{group}=...: {GROUP_OWNERS[group][0]} belong to {GROUP_OWNERS[group][1]}; this command "
+            f"takes {GROUP_OWNERS[group][2]}"
+        )
     lines = [line.strip().rstrip(".") for line in str(exc).splitlines() if line.strip()]
     override = getattr(exc, "override", None)  # a malformed override: the parser's message does not name it
     return (f"{override}: " if override else "") + ("; ".join(lines) or type(exc).__name__)
