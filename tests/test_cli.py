@@ -118,20 +118,22 @@ def test_rheograph_command_runs_the_entry_points_outside_the_repository(tmp_path
     assert unknown.returncode == 2 and "unknown command 'simulat'" in unknown.stderr
 
 
-def test_every_shipped_fold_bundle_has_a_lightning_checkpoint_beside_it():
+def test_every_shipped_fold_bundle_is_one_file_that_lightning_loads_too():
+    """One file per fold model: ``load_from_checkpoint`` rebuilds the network the bundle holds, with its
+    weights, and no second copy of them lies beside it."""
     import torch
 
     from rheograph.learn.module import SurrogateModule
     from rheograph.learn.registry import MODELS_DIR, list_models
 
     for name in list_models():
-        bundles = sorted((MODELS_DIR / name).glob("fold*.pt"))
-        assert bundles and all(b.with_suffix(".ckpt").is_file() for b in bundles), name
-    bundle = torch.load(MODELS_DIR / "N400_phi0.76" / "fold2.pt", map_location="cpu", weights_only=True)
-    module = SurrogateModule.load_from_checkpoint(
-        MODELS_DIR / "N400_phi0.76" / "fold2.ckpt", map_location="cpu"
-    )
+        assert sorted((MODELS_DIR / name).glob("fold*.pt")), name
+        assert not list((MODELS_DIR / name).glob("*.ckpt")), name
+    path = MODELS_DIR / "N400_phi0.76" / "fold2.pt"
+    bundle = torch.load(path, map_location="cpu", weights_only=True)
+    module = SurrogateModule.load_from_checkpoint(path, map_location="cpu", weights_only=True)
     assert all(torch.equal(v, module.state_dict()[k]) for k, v in bundle["state_dict"].items())
+    assert module.hparams.hidden == bundle["hyper_parameters"]["hidden"]
 
 
 def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whole(tmp_path, monkeypatch):
@@ -155,7 +157,7 @@ def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whol
     assert len(list((tmp_path / "models/m").glob("fold*.pt"))) == 5
     registry.ship(one_fold, "m", replace=True)
     shipped = sorted(p.name for p in (tmp_path / "models/m").iterdir())
-    assert [p for p in shipped if p.startswith("fold")] == ["fold0.ckpt", "fold0.pt"]
+    assert [p for p in shipped if p.startswith("fold")] == ["fold0.pt"]
     assert "error_model.json" not in shipped and "card.json" in shipped
     assert sorted(p.name for p in (tmp_path / "models").iterdir()) == ["m"]  # no staging folder left
     # a replacement cut between its two renames: the old model is restored, not lost to the next ship

@@ -225,10 +225,12 @@ def test_imaging_model_end_to_end_needs_the_noise_level(tiny_files, tmp_path):
 
     run_dir = train_tiny_fold(tiny_files, tmp_path, "graph=imaging")
     model = load_model(run_dir)
-    # the Lightning checkpoint beside the bundle holds the same model
+    # the bundle is a Lightning checkpoint of the same model
     from rheograph.learn.module import SurrogateModule
 
-    checkpoint = SurrogateModule.load_from_checkpoint(run_dir / "fold0.ckpt", map_location="cpu")
+    checkpoint = SurrogateModule.load_from_checkpoint(
+        run_dir / "fold0.pt", map_location="cpu", weights_only=True
+    )
     bundle = model.models[0][0].state_dict()
     assert all(torch.equal(v, checkpoint.state_dict()[k]) for k, v in bundle.items())
     snaps = read_snapshots(tiny_files[2])

@@ -1,5 +1,6 @@
 """The model file: one fold model's bundle (``fold<k>.pt``), its format, writing, reading and
-completing, its Lightning checkpoint, and batched prediction with a loaded module.
+completing, and batched prediction with a loaded module.  A bundle is also a Lightning checkpoint:
+``SurrogateModule.load_from_checkpoint("fold0.pt", weights_only=True)`` rebuilds its network.
 
 A bundle holds tensors and plain Python values only (``torch.load(weights_only=True)`` reads it): the
 module's weights and hyperparameters, the graph settings it was trained with, its fold and split, and
@@ -23,7 +24,10 @@ from rheograph.learn.datamodule import suspension_record
 from rheograph.learn.module import SurrogateModule, network_hparams, physical_targets
 from rheograph.learn.networks import registered_network
 
-BUNDLE_FORMAT = "rheograph-surrogate-2"
+BUNDLE_FORMAT = "rheograph-surrogate-3"
+# format 2 (before bundles were Lightning checkpoints): the hyperparameters under "hparams"; read through
+# _upgraded, the one place that knows it
+OLDER_FORMATS = ("rheograph-surrogate-2",)
 
 
 def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str, domain: dict) -> None:
@@ -31,18 +35,21 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
 
     ``domain`` records what the model was trained on (phi and sigma ranges, N, size ratio, edge-feature
     ranges) so that predictions outside it are flagged."""
+    import lightning as L
+
     hp = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(module.hparams).items()}
     write_bundle(
         path,
         {
             "format": BUNDLE_FORMAT,
+            "pytorch-lightning_version": L.__version__,
             # a subclass of SurrogateModule (another network) is rebuilt as itself; SurrogateModule's own
             # bundles carry no class name, so that they outlive a move of its module
             "module_class": None
             if type(module) is SurrogateModule
             else f"{type(module).__module__}:{type(module).__qualname__}",
             "state_dict": module.state_dict(),
-            "hparams": hp,
+            "hyper_parameters": hp,  # Lightning's key: load_from_checkpoint rebuilds the module from them
             "graph": {
                 **settings.__dict__,
                 "edge_features": list(settings.edge_features),
@@ -85,12 +92,29 @@ def read_bundle(path: str | Path) -> dict:
             f"{path}: not a readable rheograph model bundle ({why}); a model is a shipped model's name, "
             "a training run directory or one of its fold*.pt"
         ) from exc
-    if not isinstance(bundle, dict) or bundle.get("format") != BUNDLE_FORMAT:
+    if not isinstance(bundle, dict) or bundle.get("format") not in (BUNDLE_FORMAT, *OLDER_FORMATS):
         raise InputError(
             f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
             "retrained"
         )
-    return bundle
+    return _upgraded(bundle)
+
+
+def _upgraded(bundle: dict) -> dict:
+    """A bundle of an older format in the current one (the weights and every record unchanged)."""
+    if bundle["format"] == BUNDLE_FORMAT:
+        return bundle
+    import lightning as L
+
+    upgraded = {k: v for k, v in bundle.items() if k != "hparams"}
+    upgraded.update(
+        {
+            "format": BUNDLE_FORMAT,
+            "hyper_parameters": bundle.get("hparams"),
+            "pytorch-lightning_version": L.__version__,
+        }
+    )
+    return upgraded
 
 
 def bundle_graph_settings(bundle: dict) -> GraphSettings:
@@ -111,7 +135,7 @@ def load_bundle(
     bundle = read_bundle(path)
     module_class = registered_network(bundle.get("module_class"), path, network_class)
     try:  # a damaged bundle: entries missing or of the wrong type, weights of another network
-        module = module_class(**network_hparams(bundle["hparams"], module_class))
+        module = module_class(**network_hparams(bundle["hyper_parameters"], module_class))
         module.load_state_dict(bundle["state_dict"])
         module.eval()
         settings = bundle_graph_settings(bundle)
@@ -133,24 +157,6 @@ def complete_bundle(bundle: dict, split_file: Path) -> dict:
         return bundle
     files = json.loads(split_file.read_text())["files"]
     return {**bundle, "domain": {**domain, **suspension_record(files)}}
-
-
-def write_lightning_checkpoint(bundle: dict, path: Path) -> None:
-    """The weights and hyperparameters of a fold bundle as a Lightning checkpoint at ``path``:
-    ``SurrogateModule.load_from_checkpoint(path)`` (or that of the class the card names) rebuilds the
-    module (the graph settings and the trained domain stay in the bundle)."""
-    import lightning as L  # lazily: inference does without it
-
-    buffer = io.BytesIO()
-    torch.save(
-        {
-            "state_dict": bundle["state_dict"],
-            "hyper_parameters": bundle["hparams"],
-            "pytorch-lightning_version": L.__version__,
-        },
-        buffer,
-    )
-    path.write_bytes(buffer.getvalue())
 
 
 @torch.no_grad()

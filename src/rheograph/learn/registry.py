@@ -22,7 +22,7 @@ import shutil
 from pathlib import Path
 
 from rheograph.errors import InputError
-from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle, write_lightning_checkpoint
+from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
@@ -160,7 +160,7 @@ def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_di
         "position_noise": domain.get("position_noise", 0.0),
         # another network than SurrogateModule's own: its class must be registered where the model is used
         "module_class": bundle.get("module_class"),
-        "on_state_mean": bool(bundle["hparams"].get("on_state_mean", False)),
+        "on_state_mean": bool(bundle["hyper_parameters"].get("on_state_mean", False)),
         "held_out_r2": _score_rows(metrics),
     }
     (directory / "card.json").write_text(json.dumps(card, indent=1))
@@ -316,7 +316,6 @@ def ship(run_dir: str | Path, name: str, replace: bool = False) -> Path:
         for path in bundles:
             bundle = complete_bundle(read_bundle(path), path.with_name(path.stem + "_split.json"))
             write_bundle(staging / path.name, bundle)
-            write_lightning_checkpoint(bundle, staging / f"{path.stem}.ckpt")
             first = first or bundle
         if (run_dir / "error_model.json").is_file():
             shutil.copy(run_dir / "error_model.json", staging / "error_model.json")
@@ -334,6 +333,17 @@ def ship(run_dir: str | Path, name: str, replace: bool = False) -> Path:
     return directory
 
 
+def upgrade(name: str) -> int:
+    """Rewrites the bundles of the shipped model ``name`` in the current format (weights and records
+    unchanged: ``read_bundle`` upgrades them) and removes the separate Lightning checkpoints that older
+    versions shipped beside them (a bundle is one now).  Returns the number of bundles rewritten."""
+    paths, _ = model_paths(name)
+    for path in paths:
+        write_bundle(path, read_bundle(path))
+        path.with_suffix(".ckpt").unlink(missing_ok=True)
+    return len(paths)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
@@ -342,9 +352,14 @@ def main(argv=None) -> None:
     s.add_argument("--name", required=True)
     s.add_argument("--replace", action="store_true", help="replace a model already shipped under --name")
     sub.add_parser("list", help="the shipped models")
+    u = sub.add_parser("upgrade", help="rewrite shipped models' bundles in the current format")
+    u.add_argument("names", nargs="*", help="default: every shipped model")
     args = ap.parse_args(argv)
     if args.command == "ship":
         print(ship(args.run_dir, args.name, replace=args.replace))
+    elif args.command == "upgrade":
+        for name in args.names or list_models():
+            print(name, upgrade(name))
     else:
         for name in list_models():
             print(name)

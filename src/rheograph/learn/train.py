@@ -191,8 +191,6 @@ def train_fold(
     )
     if not np.isfinite(best_val):
         raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
-    # the same weights as a Lightning checkpoint: SurrogateModule.load_from_checkpoint(fold<k>.ckpt)
-    trainer.save_checkpoint(run_dir / f"fold{k}.ckpt", weights_only=True)
     test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
     pred, true, meta = predict_dataset(module, dm.graphs(dm.test_idx))
     fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
