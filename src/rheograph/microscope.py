@@ -170,7 +170,7 @@ def _periodic_padding(image: np.ndarray, pad: int, le_offset_px: float) -> np.nd
     return np.concatenate([tall[:, -pad:], tall, tall[:, :pad]], axis=1)
 
 
-def _min_image(delta: np.ndarray, lx: float, ly: float, le_offset: float) -> np.ndarray:
+def min_image(delta: np.ndarray, lx: float, ly: float, le_offset: float) -> np.ndarray:
     """Separations (..., 2) [a] mapped to their nearest periodic image under Lees–Edwards."""
     out = np.array(delta, dtype=np.float64)
     images = np.round(out[..., 1] / ly)
@@ -187,7 +187,7 @@ def _drop_images(positions, lx: float, ly: float, le_offset: float, closer_than:
     keep = list(np.flatnonzero(~near))
     kept_near = []
     for k in np.flatnonzero(near):
-        gaps = _min_image(positions[kept_near] - positions[k], lx, ly, le_offset)
+        gaps = min_image(positions[kept_near] - positions[k], lx, ly, le_offset)
         if not kept_near or np.hypot(gaps[:, 0], gaps[:, 1]).min() >= closer_than:
             kept_near.append(k)
     return np.sort(np.array(keep + kept_near, dtype=np.int64))
@@ -217,27 +217,25 @@ def two_species_threshold(sizes: np.ndarray) -> float:
     return float(threshold)
 
 
-def track_frame(
+def locate_particles(
     image,
     pixel_size: float,
     diameter_px: int,
     le_offset: float = 0.0,
-    radii: tuple[float, float] = (1.0, 1.4),
     separation_px: float | None = None,
     minmass: float | None = None,
-) -> TrackedFrame:
-    """Locate the particles of a frame (rows, columns) whose field of view is the periodic box, with
-    ``trackpy.locate``, and sort them into the two species.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Particles of a frame (rows, columns) whose field of view is the periodic box, located with
+    ``trackpy.locate``: positions (M, 2) [a] in [-Lx/2, Lx/2) x [-Ly/2, Ly/2), trackpy's sizes (M,)
+    [pixels] (radius of gyration of the brightness) and its static error estimates (M,) [a].
 
     ``pixel_size`` [a per pixel]; ``diameter_px``: trackpy's feature diameter, odd, at least the largest
     particles' bright disc (core plus PSF blur) in pixels; ``le_offset`` [a]: the Lees–Edwards offset
-    (the frame is padded with its periodic images, so particles cut by an edge are found once, whole);
-    ``radii``: the nominal (small, large) radii [a] the species are given.  ``separation_px``: features
-    closer than this are one particle; default 1.5 a (no two centres are closer than 2 a, two small
-    particles in contact).  ``minmass``: default 0.3 × the median mass of the candidates (a small
-    particle's integrated brightness is ~0.6 of a large one's; shot-noise peaks in the gaps have a few
-    per cent of it).  The species: trackpy's ``size`` (radius of gyration, independent of brightness)
-    split at ``two_species_threshold``."""
+    (the frame is padded with its periodic images, so particles cut by an edge are found once, whole).
+    ``separation_px``: features closer than this are one particle; default 1.5 a (no two centres are
+    closer than 2 a, two small particles in contact).  ``minmass``: default 0.3 × the median mass of the
+    candidates (a small particle's integrated brightness is ~0.6 of a large one's; shot-noise peaks in
+    the gaps have a few per cent of it)."""
     trackpy = _import_trackpy()
     image = np.asarray(image, dtype=np.float64)
     if image.ndim != 2 or min(image.shape) < 3 or not np.all(np.isfinite(image)):
@@ -249,7 +247,7 @@ def track_frame(
     diameter_px = int(diameter_px)
     rows, cols = image.shape
     lx, ly = cols * pixel_size, rows * pixel_size
-    separation_px = 1.5 * min(radii) / pixel_size if separation_px is None else separation_px
+    separation_px = 1.5 / pixel_size if separation_px is None else separation_px
     pad = diameter_px + int(np.ceil(separation_px))
     padded = _periodic_padding(image, pad, le_offset / pixel_size)
     features = trackpy.locate(padded, diameter_px, separation=separation_px, minmass=0)
@@ -263,15 +261,33 @@ def track_frame(
     xy = wrap_into_box(xy[inside], lx, ly, le_offset)
     keep = _drop_images(xy, lx, ly, le_offset, separation_px * pixel_size)
     sizes = features["size"].to_numpy()[inside][keep]
+    return xy[keep], sizes, features["ep"].to_numpy()[inside][keep] * pixel_size
+
+
+def track_frame(
+    image,
+    pixel_size: float,
+    diameter_px: int,
+    le_offset: float = 0.0,
+    radii: tuple[float, float] = (1.0, 1.4),
+    separation_px: float | None = None,
+    minmass: float | None = None,
+) -> TrackedFrame:
+    """The particles of a frame located (``locate_particles``, whose arguments these are) and sorted
+    into two species by trackpy's ``size`` (radius of gyration: independent of brightness, so of
+    bleaching and uneven illumination) split at ``two_species_threshold``; each is given its species'
+    nominal radius of ``radii`` = (small, large) [a]."""
+    positions, sizes, errors = locate_particles(
+        image, pixel_size, diameter_px, le_offset, separation_px, minmass
+    )
     threshold = two_species_threshold(sizes)
-    precision = features["ep"].to_numpy()[inside][keep]
     return TrackedFrame(
-        positions=xy[keep],
+        positions=positions,
         radii=np.where(sizes < threshold, float(min(radii)), float(max(radii))),
-        box=(lx, ly),
+        box=(image.shape[1] * pixel_size, image.shape[0] * pixel_size),
         sizes=sizes,
         size_threshold=threshold,
-        precision=float(np.nanmedian(precision) * pixel_size) if np.isfinite(precision).any() else math.nan,
+        precision=float(np.nanmedian(errors)) if np.isfinite(errors).any() else math.nan,
     )
 
 
