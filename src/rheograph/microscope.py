@@ -193,28 +193,36 @@ def _drop_images(positions, lx: float, ly: float, le_offset: float, closer_than:
     return np.sort(np.array(keep + kept_near, dtype=np.int64))
 
 
-def two_species_threshold(sizes: np.ndarray) -> float:
-    """The size threshold between two species: 1-D 2-means (Lloyd's iteration from the extremes), the
-    midpoint of the two means; refuses sizes that do not form two separate groups (means closer than
-    four pooled standard deviations: more than ~2 % of the particles would be misassigned)."""
-    sizes = np.asarray(sizes, dtype=np.float64)
-    threshold = 0.5 * (sizes.min() + sizes.max())
+def two_means(values) -> float:
+    """The threshold between the two groups of ``values`` (1-D 2-means, Lloyd's iteration from the
+    extremes): the midpoint of the two groups' means."""
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
+    threshold = 0.5 * (values.min() + values.max())
     for _ in range(100):
-        low, high = sizes[sizes < threshold], sizes[sizes >= threshold]
+        low, high = values[values < threshold], values[values >= threshold]
         if not low.size or not high.size:
             break
         updated = 0.5 * (low.mean() + high.mean())
         if updated == threshold:
             break
         threshold = updated
+    return float(threshold)
+
+
+def two_species_threshold(sizes) -> float:
+    """The size threshold between two species (``two_means``); refuses sizes that do not form two
+    separate groups (means closer than four pooled standard deviations: more than ~2 % of the particles
+    would be misassigned)."""
+    sizes = np.asarray(sizes, dtype=np.float64)
+    threshold = two_means(sizes) if sizes.size else math.nan
     low, high = sizes[sizes < threshold], sizes[sizes >= threshold]
-    spread = math.sqrt((low.var() * low.size + high.var() * high.size) / sizes.size) if sizes.size else 0.0
+    spread = math.sqrt((low.var() * low.size + high.var() * high.size) / sizes.size) if sizes.size > 3 else 0
     if low.size < 2 or high.size < 2 or high.mean() - low.mean() < 4 * spread:
         raise InputError(
             "radii: the tracked particles' sizes do not fall into two separate groups (small and large): "
             "check diameter_px (the largest particles' bright disc in pixels) and the focus"
         )
-    return float(threshold)
+    return threshold
 
 
 def locate_particles(
@@ -233,9 +241,11 @@ def locate_particles(
     particles' bright disc (core plus PSF blur) in pixels; ``le_offset`` [a]: the Lees–Edwards offset
     (the frame is padded with its periodic images, so particles cut by an edge are found once, whole).
     ``separation_px``: features closer than this are one particle; default 1.5 a (no two centres are
-    closer than 2 a, two small particles in contact).  ``minmass``: default 0.3 × the median mass of the
-    candidates (a small particle's integrated brightness is ~0.6 of a large one's; shot-noise peaks in
-    the gaps have a few per cent of it)."""
+    closer than 2 a, two small particles in contact).  ``minmass``: trackpy's least integrated
+    brightness of a particle; by default none, and instead a feature is a particle where the frame
+    (smoothed over a pixel) is brighter at its centre than ``two_means`` of its pixels, the midpoint of
+    its dark and bright levels: a particle's core, not a shot-noise peak in a gap (a rule that holds in
+    sparse and dense frames alike, where a fraction of the features' masses does not)."""
     trackpy = _import_trackpy()
     image = np.asarray(image, dtype=np.float64)
     if image.ndim != 2 or min(image.shape) < 3 or not np.all(np.isfinite(image)):
@@ -250,10 +260,11 @@ def locate_particles(
     separation_px = 1.5 / pixel_size if separation_px is None else separation_px
     pad = diameter_px + int(np.ceil(separation_px))
     padded = _periodic_padding(image, pad, le_offset / pixel_size)
-    features = trackpy.locate(padded, diameter_px, separation=separation_px, minmass=0)
+    features = trackpy.locate(padded, diameter_px, separation=separation_px, minmass=minmass or 0)
     if minmass is None:
-        minmass = 0.3 * float(np.median(features["mass"])) if len(features) else 0.0
-    features = features[features["mass"] >= minmass]
+        smooth = ndimage.gaussian_filter(padded, 1.0)
+        centre = smooth[features["y"].round().astype(int), features["x"].round().astype(int)]
+        features = features[centre > two_means(smooth[pad:-pad, pad:-pad])]
     x_px, y_px = features["x"].to_numpy() - pad, features["y"].to_numpy() - pad
     # the primary frame spans pixel edges -1/2 .. cols - 1/2; its images beyond are the padding's
     inside = (x_px >= -0.5) & (x_px < cols - 0.5) & (y_px >= -0.5) & (y_px < rows - 0.5)
