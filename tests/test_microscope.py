@@ -101,20 +101,24 @@ def test_micrometres_round_trip():
 
 
 @pytest.mark.parametrize(
-    "change, parameter",
+    "change, parameter, reason",
     [
-        (lambda xy, r: (xy, np.where(np.arange(len(r)) == 3, -0.5, r)), "radii_um"),
-        (lambda xy, r: (np.where(np.arange(len(xy))[:, None] == 5, [31.0, 4.0], xy), r), "table_xy_um"),
-        (lambda xy, r: (xy, r * 2), "radii_um"),  # diameters given as radii
+        (lambda xy, r: (xy, np.where(np.arange(len(r)) == 3, -0.5, r)), "radii_um", "positive radii"),
+        (
+            lambda xy, r: (np.where(np.arange(len(xy))[:, None] == 5, [31.0, 4.0], xy), r),
+            "table_xy_um",
+            "outside the field of view",
+        ),
+        (lambda xy, r: (xy, r * 2), "radii_um", "not their diameter"),  # diameters given as radii
     ],
 )
-def test_bad_micrometre_tables_are_refused_in_one_line(change, parameter):
+def test_bad_micrometre_tables_are_refused_in_one_line(change, parameter, reason):
     rng = np.random.default_rng(5)
     xy, radii = change(rng.uniform(0, 30, (10, 2)), np.full(10, 0.75))
     with pytest.raises(InputError) as err:
         from_micrometres(xy, radii, (30.0, 30.0), 0.75)
     message = str(err.value)
-    assert message.startswith(parameter) and "\n" not in message
+    assert message.startswith(parameter) and reason in message and "\n" not in message
 
 
 def test_lost_particles_are_refused_not_rescaled():
