@@ -10,7 +10,7 @@ minimum image): RMS error per coordinate, particles missed and spurious, species
 whose tracked particles do not give the stated φ (particles lost) is refused, as
 ``snapshot_from_frame`` refuses it, and counted.
 
-    python bench/microscope.py                         # the defaults: every steady test snapshot, ~7 min
+    python bench/microscope.py                         # the defaults: every steady test snapshot, ~12 min
     python bench/microscope.py --every 1 --uniform-frames 20
 
 ``--uniform-frames K``: also K frames of uniformly dyed particles (dyed fraction 1), scored for tracking
@@ -231,10 +231,11 @@ def summary(records: list[dict], uniform: list[dict]) -> dict:
 def markdown(result: dict, command: str) -> str:
     s, t = result["summary"], result["summary"]["tracking"]
     c = result["config"]
+    every = "every" if c["every"] == 1 else f"every {c['every']}-th"
     lines = [
         f"# Tracked frames against Gaussian noise: {c['model']}",
         "",
-        f"{t['frames']} held-out test frames (every {c['every']}-th steady snapshot of the test "
+        f"{t['frames']} held-out test frames ({every} steady snapshot of the test "
         f"trajectories, each fold model on its own), pixel {c['pixel_size']:g} a, PSF σ {c['psf']:g} a, "
         f"{c['photons']:g} photons per pixel on a dyed core of {c['dyed_fraction']:g} of the radius, "
         f"background {c['background']:g}, trackpy diameter {c['diameter_px']} px.",
