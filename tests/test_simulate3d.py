@@ -288,3 +288,24 @@ def test_the_memory_estimate_of_a_3d_run_is_its_own(monkeypatch):
     check_simulation_memory(20_000)  # 2D: 0.18 GB
     with pytest.raises(InputError, match="a 3D simulation of sim.n_particles=20000 needs about 4.52 GB"):
         check_simulation_memory(20_000, dim=3)
+
+
+def test_the_3d_preset_sets_every_3d_parameter_with_the_2d_physics():
+    from hydra import compose, initialize_config_dir
+
+    from rheograph.cli import register_resolvers
+
+    register_resolvers()
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=["sim=3d"])
+    assert set(cfg.sim) == set(SimParams3D().to_dict())
+    params = params_from_mapping(dict(cfg.sim))
+    assert params == SimParams3D(
+        n_particles=500, phi=0.5, integrator="implicit", disp_max=2e-3, snapshot_interval=0.1
+    )
+    two_d = SimParams(integrator="implicit", disp_max=2e-3, snapshot_interval=0.1).to_dict()
+    assert {k: v for k, v in params.to_dict().items() if k in two_d and k not in ("n_particles", "phi")} == {
+        k: v for k, v in two_d.items() if k not in ("n_particles", "phi")
+    }
+    n_small, n_large = params.species_counts()  # bidisperse 1 : 1.4 with equal volumes of both
+    assert (n_small, n_large) == (366, 134) and n_small == pytest.approx(1.4**3 * n_large, rel=0.01)
