@@ -389,7 +389,7 @@ class TrajectoryFile:
             cp = h5["checkpoint"]
             if "positions" not in cp:
                 raise DamagedTrajectoryError(f"{self.path}: checkpoint is incomplete; move the file away")
-            state = _state_from_checkpoint(cp, file_dim(h5))
+            state = _state_from_checkpoint(cp)
             counters = json.loads(cp.attrs["counters"])
             # drop rows written after the checkpoint: they will be recomputed identically
             for name in timeseries_scalars(file_dim(h5)) + TIMESERIES_TENSORS:
@@ -517,13 +517,12 @@ def read_checkpoint(path: str | Path) -> tuple[SimParams, SimState | SimState3D]
     with h5py.File(path, "r") as h5:
         if "checkpoint" not in h5 or "positions" not in h5["checkpoint"]:
             raise TrajectoryFileError(f"{path}: no checkpoint")
-        return params_from_mapping(json.loads(h5.attrs["params"])), _state_from_checkpoint(
-            h5["checkpoint"], file_dim(h5)
-        )
+        return params_from_mapping(json.loads(h5.attrs["params"])), _state_from_checkpoint(h5["checkpoint"])
 
 
-def _state_from_checkpoint(cp: h5py.Group, dim: int) -> SimState | SimState3D:
-    cls = SimState3D if dim == 3 else SimState
+def _state_from_checkpoint(cp: h5py.Group) -> SimState | SimState3D:
+    """The state saved in a checkpoint group; a 3D one in a 3D file."""
+    cls = SimState3D if file_dim(cp.file) == 3 else SimState
     state = cls(
         **{name: cp[name][()] for name in cls.ARRAYS},
         **{name: cp.attrs[name] for name in cls.SCALARS if name in cp.attrs},
