@@ -190,7 +190,9 @@ def test_a_2d_run_writes_the_file_it_wrote_before_3d_existed(tmp_path):
 
 
 def test_rate_control_holds_the_imposed_rate_in_the_written_series(tmp_path):
-    params = SimParams3D(**{**TINY_3D, "strain": 0.1, "control": "rate", "shear_rate": 0.3})
+    # an apparent viscosity sigma / rate = 33 far above jam_viscosity: an imposed rate still never stalls
+    rate = {"control": "rate", "shear_rate": 0.3, "jam_viscosity": 2.0}
+    params = SimParams3D(**{**TINY_3D, "strain": 0.1, **rate})
     path = tmp_path / "rate.h5"
     assert run_state_point(params, path, progress=False).status == "completed"
     ts = read_timeseries(path)

@@ -246,7 +246,8 @@ class _RunLoop:
         return self.cpu_before + wallclock.process_time() - self.cpu_start
 
     def stalled(self) -> bool:
-        if self.rate_controlled or len(self.jam_window) < self.params.jam_intervals:
+        # empty under rate control (``_row`` records no window): never stalled
+        if len(self.jam_window) < self.params.jam_intervals:
             return False
         total_time = sum(w[0] for w in self.jam_window)
         total_strain = sum(w[1] for w in self.jam_window)
