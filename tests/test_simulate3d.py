@@ -311,3 +311,14 @@ def test_the_3d_preset_sets_every_3d_parameter_with_the_2d_physics():
     }
     n_small, n_large = params.species_counts()  # bidisperse 1 : 1.4 with equal volumes of both
     assert (n_small, n_large) == (366, 134) and n_small == pytest.approx(1.4**3 * n_large, rel=0.01)
+
+
+def test_a_3d_run_never_resumes_a_2d_file(tmp_path):
+    from rheograph.io.hdf5 import TrajectoryFileError
+
+    path = tmp_path / "run.h5"
+    two_d = SimParams(**{**TINY_3D, "phi": 0.7, "strain": 0.02})
+    run_state_point(two_d, path, progress=False)
+    three_d = SimParams3D(**{**TINY_3D, "seed": two_d.seed})
+    with pytest.raises(TrajectoryFileError, match=r"another state point \(dim: file 2 vs requested 3"):
+        run_state_point(three_d, path, progress=False)
