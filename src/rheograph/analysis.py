@@ -16,17 +16,23 @@ def steady_state_summary(
     stress: float,
     strain_min: float,
     n_blocks: int = 5,
+    viscosity: np.ndarray | None = None,
+    series: dict | None = None,
 ) -> dict:
     """Strain-weighted means over the rows with strain >= strain_min of a time series.
 
     eta_r = sigma * (time elapsed) / (strain accumulated): the time average of the shear rate gives the
-    steady viscosity (equal to the strain-weighted mean of the instantaneous sigma/shear_rate).
+    steady viscosity (equal to the strain-weighted mean of the instantaneous sigma/shear_rate).  Under
+    rate control there is no imposed sigma: ``viscosity``, the instantaneous sigma_xy / (eta0 rate)
+    series, is averaged with the strain weights instead.  ``series``: further columns averaged the same
+    way (e.g. the 3D normal stress differences n1, n2).
     Standard errors come from ``n_blocks`` consecutive blocks of equal row count.
     Returns NaN entries (never fabricated numbers) when the window holds fewer than 2 rows per block.
     """
+    series = series or {}
     keep = strain >= strain_min
     out = {"strain_window": float(strain[keep][-1] - strain[keep][0]) if keep.sum() > 1 else 0.0}
-    names = ("viscosity", "pressure", "z_mu", "z")
+    names = ("viscosity", "pressure", "z_mu", "z", *series)
     if keep.sum() < 2 * n_blocks:
         for name in names:
             out[name] = out[name + "_se"] = float("nan")
@@ -38,20 +44,36 @@ def steady_state_summary(
     def eta(idx):
         return stress * (t[idx[-1]] - t[idx[0]]) / (s[idx[-1]] - s[idx[0]])
 
-    out["viscosity"] = float(stress * (t[-1] - t[0]) / (s[-1] - s[0]))
-    out["viscosity_se"] = float(np.std([eta(b) for b in blocks], ddof=1) / np.sqrt(n_blocks))
     # strain weights: each row stands for the strain to the next row, so rows written while the flow
     # stalled (time-triggered, see rheograph.runner) do not outweigh the strain-sampled ones
     w = np.clip(np.diff(s, append=s[-1] + np.median(np.diff(s))), 0.0, None)
     if w.sum() <= 0:
         w = np.ones_like(s)
-    for name, series in (("pressure", pressure), ("z_mu", z_mu), ("z", z)):
-        x = series[keep]
+    averaged = {"pressure": pressure, "z_mu": z_mu, "z": z, **series}
+    if viscosity is None:
+        out["viscosity"] = float(stress * (t[-1] - t[0]) / (s[-1] - s[0]))
+        out["viscosity_se"] = float(np.std([eta(b) for b in blocks], ddof=1) / np.sqrt(n_blocks))
+    else:
+        averaged["viscosity"] = viscosity
+    for name, values in averaged.items():
+        x = values[keep]
         out[name] = float(np.average(x, weights=w))
         block_means = [np.average(x[b], weights=w[b]) if w[b].sum() > 0 else x[b].mean() for b in blocks]
         out[name + "_se"] = float(np.std(block_means, ddof=1) / np.sqrt(n_blocks))
     out["n_rows"] = int(keep.sum())
     return out
+
+
+def steady_extras(params: dict, ts: dict) -> dict:
+    """The keyword arguments of ``steady_state_summary`` for a run of stored parameters ``params`` (a
+    file's ``params``) with time series ``ts``: in 3D (``dim`` 3) its normal stress differences, and under
+    rate control its viscosity series; none for a 2D run."""
+    extras = {}
+    if params.get("dim", 2) == 3:
+        extras["series"] = {"n1": ts["n1"], "n2": ts["n2"]}
+    if params.get("control", "stress") == "rate":
+        extras["viscosity"] = ts["viscosity"]
+    return extras
 
 
 def decorrelation_strain(values, strain_step: float) -> float:

@@ -50,16 +50,16 @@ class SweepFailures(Callback):
 
 
 def checked_simulate_config(cfg: DictConfig):
-    """The ``SimParams`` of a composed ``simulate`` config, once every setting that can be checked
-    without running is: the parameters, the solver backend (an unknown or missing one), and the memory
-    the simulation will need.  Raises ``InputError``."""
+    """The ``SimParams`` (``SimParams3D`` for ``sim.dim=3``) of a composed ``simulate`` config, once every
+    setting that can be checked without running is: the parameters, the solver backend (an unknown or
+    missing one), and the memory the simulation will need.  Raises ``InputError``."""
     from rheograph.resources import check_simulation_memory
-    from rheograph.sim.params import SimParams
+    from rheograph.sim.params3d import params_from_mapping
     from rheograph.sim.solver import resolve_solver_name
 
-    params = SimParams.from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
+    params = params_from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
     resolve_solver_name(cfg.solver)
-    check_simulation_memory(params.n_particles)
+    check_simulation_memory(params.n_particles, params.DIM)
     return params
 
 
@@ -163,7 +163,7 @@ def simulate_main(cfg: DictConfig) -> dict:
         outcome.steps,
         outcome.wall_seconds,
     )
-    for key in ("viscosity", "pressure", "z_mu", "z"):
+    for key in ("viscosity", "pressure", "z_mu", "z", "n1", "n2"):
         if key in outcome.summary:
             log.info("  steady %s = %.4g +- %.2g", key, outcome.summary[key], outcome.summary[key + "_se"])
     return {"status": outcome.status, "path": str(path), **outcome.summary}

@@ -5,7 +5,8 @@
 The index (``rheograph.io.index``) lists every rheograph trajectory under the given directories with its
 parameters, status, strain and snapshot count; ``data.files=data/index.json`` trains on the listed files
 whose status is completed (or jammed, whose snapshots are valid configurations).  Foreign or unreadable
-.h5 files are reported and skipped.
+.h5 files are reported and skipped.  A 3D run's entry says so in its parameters (``dim`` 3; 2D runs carry
+no ``dim``).
 """
 
 from __future__ import annotations
@@ -51,7 +52,11 @@ def main(argv=None) -> None:
         print(f"compacted: {saved / 1e6:.1f} MB saved")
     write_index(index, args.out)
     usable = sum(e["status"] in USABLE for e in index["runs"])
-    print(f"{len(index['runs'])} runs ({usable} usable), {len(index['skipped'])} skipped -> {args.out}")
+    three_d = sum(e["params"].get("dim", 2) == 3 for e in index["runs"])
+    of_them = f", {three_d} of them 3D" if three_d else ""
+    print(
+        f"{len(index['runs'])} runs ({usable} usable{of_them}), {len(index['skipped'])} skipped -> {args.out}"
+    )
     for s in index["skipped"]:
         print(f"  skipped {s['path']}: {s['reason']}")
 

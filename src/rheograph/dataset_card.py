@@ -104,6 +104,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
         records.append(
             dict(
                 n=p["n_particles"],
+                dim=p.get("dim", 2),
                 phi=p["phi"],
                 mu=p["mu"],
                 stress=p["stress"],
@@ -208,9 +209,14 @@ def card_markdown(
     by_phi_n = defaultdict(list)
     for r in records:
         by_phi_n[(r["n"], r["phi"], r["mu"])].append(r)
+    three_d = [
+        "3D suspensions: spheres in a cube, φ a volume fraction (every file's `dim` is 3).",
+        "",
+    ]
     lines = [
         f"# {title}",
         "",
+        *(three_d if any(r["dim"] == 3 for r in records) else []),
         "Regenerate (resumable; finished state points are skipped):",
         "",
         "```bash",
@@ -565,6 +571,11 @@ def main(argv=None) -> None:
     if not data.is_dir():
         raise InputError(f"data directory {data} does not exist")
     index = build_index([data])
+    if len({entry["params"].get("dim", 2) for entry in index["runs"]}) > 1:
+        raise InputError(
+            f"{data} holds both 2D and 3D runs: a card describes one dimension (its flow curves and counts "
+            "never pool them); card each from its own directory"
+        )
     write_index(index, data / "index.json")
     records = run_records(index, args.min_strain)
     if not records:

@@ -8,6 +8,9 @@ value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)
 block standard errors.  Runs stopped early (wall-clock limit) are included and flagged by their status and
 reached strain; shear-jammed runs are listed as such: their viscosity is never averaged, their pressure
 and coordination (finite: the loaded static packing) are, where no seed of the state point flows.
+2D and 3D runs are never pooled: a 3D state point is its own row, its N shown as e.g. ``500 (3D)`` (and
+the imposed rate of a rate-controlled run, ``500 (3D, rate 0.1)``, whose σ/σ0 in the table is the
+measured steady stress η_r γ̇); Π_2D/σ, the 2D convention's pressure, is left empty for a 3D run.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rheograph.analysis import steady_state_summary
+from rheograph.analysis import steady_extras, steady_state_summary
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.configurations import DAMAGED_FILE_ERRORS
 from rheograph.io.hdf5 import PRODUCER, read_run_info, read_timeseries
@@ -64,6 +67,7 @@ def collect(directories) -> list[dict]:
                     ts["z"],
                     p["stress"],
                     p["steady_state_strain"],
+                    **steady_extras(p, ts),
                 )
                 # the slowest flow recorded in the steady window (one row every output interval): how close a
                 # flowing run came to arresting
@@ -72,9 +76,14 @@ def collect(directories) -> list[dict]:
                 info["slowest_rate"] = (
                     float(rate[window].min()) if rate is not None and window.any() else float("nan")
                 )
-                # LF_DEM's lagged step control is another discretisation: never pooled with the default
+                # LF_DEM's lagged step control is another discretisation: never pooled with the default;
+                # nor are 3D runs with 2D ones, or rate-controlled runs with stress-controlled ones
                 scheme = scheme_name(p["integrator"], p.get("lagged_step_control", False))
-                key = (p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme)
+                rate = p["shear_rate"] if p.get("control", "stress") == "rate" else 0.0
+                key = (
+                    p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme,
+                    p.get("dim", 2), rate,
+                )  # fmt: skip
                 seed = p["seed"]
             except DAMAGED_FILE_ERRORS as exc:  # the file, its parameters or its time series damaged
                 raise InputError(
@@ -85,7 +94,7 @@ def collect(directories) -> list[dict]:
             if same_start is None or info["strain"] > same_start["strain"]:
                 groups[key][seed] = info
     points = []
-    for (n, phi, stress, mu, disp, integrator), by_seed in sorted(groups.items()):
+    for (n, phi, stress, mu, disp, integrator, dim, rate), by_seed in sorted(groups.items()):
         infos = list(by_seed.values())
         point = dict(
             n_particles=n,
@@ -94,6 +103,8 @@ def collect(directories) -> list[dict]:
             disp_max=disp,
             mu=mu,
             integrator=integrator,
+            dim=dim,
+            imposed_rate=rate,  # 0: stress control
             statuses=sorted({i["status"] for i in infos}),
             strain=float(np.mean([i["strain"] for i in infos])),
         )
@@ -170,6 +181,15 @@ def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
     return out
 
 
+def system_label(point: dict) -> str:
+    """N of a flow-curve point, with its dimension and imposed rate where it is not a 2D stress-controlled
+    run: ``400``, ``500 (3D)``, ``500 (3D, rate 0.1)``."""
+    notes = ["3D"] if point.get("dim", 2) == 3 else []
+    if point.get("imposed_rate", 0.0):
+        notes.append(f"rate {point['imposed_rate']:g}")
+    return f"{point['n_particles']}" + (f" ({', '.join(notes)})" if notes else "")
+
+
 def markdown_table(points, reference=()) -> str:
     lines = [
         "| N | φ | σ/σ0 | disp_max | integrator | seeds | strain | η_r | Π/σ | Π_2D/σ (=1.5Π/σ) | Z_μ | Z "
@@ -177,20 +197,25 @@ def markdown_table(points, reference=()) -> str:
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for p in points:
+        # under rate control the stress is measured, not imposed: sigma = eta_r * rate
+        rate = p.get("imposed_rate", 0.0)
+        p = {**p, "stress": p["viscosity"] * rate} if rate else p
+        # the 2D monolayer's pressure convention (sigma_zz = 0) has no meaning for a 3D suspension
+        pressure_2d = "–" if p.get("dim", 2) == 3 else f"{1.5 * p['pressure'] / p['stress']:.3f}"
         if p["jammed"] and not np.isfinite(p["viscosity"]):
             vals = (
                 f"shear-jammed | {p['pressure'] / p['stress']:.3f} | "
-                f"{1.5 * p['pressure'] / p['stress']:.3f} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
+                f"{pressure_2d} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
                 f"{p['z']:.2f}"
             )
         else:
             vals = (
                 f"{p['viscosity']:.1f} ± {p['viscosity_se']:.1f} | {p['pressure'] / p['stress']:.3f} | "
-                f"{1.5 * p['pressure'] / p['stress']:.3f} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
+                f"{pressure_2d} | {p['z_mu']:.2f} ± {p['z_mu_se']:.2f} | "
                 f"{p['z']:.2f}"
             )
         lines.append(
-            f"| {p['n_particles']} | {p['phi']:g} | {p['stress']:g} | {p['disp_max']:g} | "
+            f"| {system_label(p)} | {p['phi']:g} | {p['stress']:g} | {p['disp_max']:g} | "
             f"{p['integrator']} | {p['n_seeds']} | {p['strain']:.1f} | {vals} | "
             f"{','.join(p['statuses'])} |"
         )
@@ -221,11 +246,13 @@ def plot(points, reference, out_png: Path) -> None:
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.9))
     series = defaultdict(list)
     for p in points:
-        series[(p["phi"], p["disp_max"], p["integrator"])].append(p)
-    for (phi, disp, integrator), pts in sorted(series.items()):
+        series[(p["phi"], p["disp_max"], p["integrator"], p["dim"], p["imposed_rate"])].append(p)
+    for (phi, disp, integrator, dim, rate), pts in sorted(series.items()):
         pts = sorted(pts, key=lambda q: q["stress"])
         s = np.array([q["stress"] for q in pts])
         label = f"φ={phi:g} (disp_max {disp:g}, {integrator})"
+        label += ", 3D" if dim == 3 else ""
+        label += f", rate {rate:g}" if rate else ""
         if all(q["jammed"] for q in pts):
             label += ", shear-jammed"
         for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):

@@ -15,15 +15,31 @@ def state_point_key(phi, stress):
     )
 
 
-def sim_id(n_particles, phi, stress, seed, disp_max, integrator, lagged_step_control=False) -> str:
+def sim_id(
+    n_particles,
+    phi,
+    stress,
+    seed,
+    disp_max,
+    integrator,
+    lagged_step_control=False,
+    dim=2,
+    control="stress",
+    shear_rate=None,
+) -> str:
     """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended
-    with LF_DEM's lagged step control)."""
-    # a value that is not a number still names a directory: SimParams refuses it by name afterwards
-    phi, stress, disp_max = (
-        f"{v:g}" if isinstance(v, int | float) else str(v) for v in (phi, stress, disp_max)
-    )
-    name = f"N{n_particles}_phi{phi}_s{stress}_seed{seed}_d{disp_max}_{integrator}"
-    return name + "_lagged" if lagged_step_control else name
+    with LF_DEM's lagged step control); a 3D run's ends in ``_3d`` and, under rate control, names its
+    imposed rate after the stress that scales its springs: N500_phi0.5_s10_rate0.1_seed1_d0.002_implicit_3d.
+    """
+
+    def text(v):  # a value that is not a number still names a directory: SimParams refuses it afterwards
+        return f"{v:g}" if isinstance(v, int | float) else str(v)
+
+    phi, stress, disp_max = (text(v) for v in (phi, stress, disp_max))
+    rate = f"_rate{text(shear_rate)}" if dim == 3 and control == "rate" else ""
+    name = f"N{n_particles}_phi{phi}_s{stress}{rate}_seed{seed}_d{disp_max}_{integrator}"
+    name += "_lagged" if lagged_step_control else ""
+    return name + "_3d" if dim == 3 else name
 
 
 def run_name(params) -> str:
@@ -36,4 +52,7 @@ def run_name(params) -> str:
         params.disp_max,
         params.integrator,
         params.lagged_step_control,
+        params.DIM,
+        getattr(params, "control", "stress"),
+        getattr(params, "shear_rate", None),
     )

@@ -30,6 +30,13 @@ MEMORY_LIMIT_ENV = "RHEOGRAPH_MEMORY_LIMIT_GB"
 # particle times MARGIN (9 kB per particle: 1.5-1.7x every measurement, 1.2x the jamming run's): it covers
 # what was not measured (denser packings, longer neighbour lists, allocator slack).
 SIMULATION_BYTES_PER_PARTICLE = 6.0e3
+# 3D (6 degrees of freedom per sphere, more neighbours than a disc): measured the same way (an N = 60
+# warm-up, then Simulation3D(N) and 20 implicit steps at sigma/sigma0 10, phi 0.5, CHOLMOD): 25 MB at
+# N = 500 (51 kB per particle), 140 MB at N = 2000 (70 kB per particle).  The cost per particle grows with
+# N: the fill of a 3D sparse Cholesky factor grows as N^(4/3) under nested dissection, so beyond N = 2000
+# the 70 kB are scaled by (N / 2000)^(1/3).
+SIMULATION_BYTES_PER_PARTICLE_3D = 70.0e3
+MEASURED_N_3D = 2000
 MARGIN = 1.5
 # Graphs held by the graph builder, per particle and snapshot: GRAPH_BYTES_PER_EDGE per edge of a particle
 # plus GRAPH_BYTES_PER_PARTICLE, a line just above the peaks measured at N = 2000, phi 0.76 (25 snapshots,
@@ -44,9 +51,13 @@ PREDICTION_BYTES_PER_NODE = 6.5e3
 PREDICTION_BATCH = 64  # graphs per forward pass (rheograph.learn.bundle.predict_dataset's default)
 
 
-def simulation_bytes(n_particles: int) -> float:
-    """Estimated peak memory [bytes] one simulation of ``n_particles`` allocates (state, neighbour list,
-    resistance matrix and its sparse Cholesky factor), beyond the libraries already loaded."""
+def simulation_bytes(n_particles: int, dim: int = 2) -> float:
+    """Estimated peak memory [bytes] one simulation of ``n_particles`` in ``dim`` dimensions allocates
+    (state, neighbour list, resistance matrix and its sparse Cholesky factor), beyond the libraries
+    already loaded."""
+    if dim == 3:
+        fill_growth = max(1.0, n_particles / MEASURED_N_3D) ** (1.0 / 3.0)
+        return MARGIN * SIMULATION_BYTES_PER_PARTICLE_3D * fill_growth * n_particles
     return MARGIN * SIMULATION_BYTES_PER_PARTICLE * n_particles
 
 
@@ -189,10 +200,11 @@ def check_memory(needed: float, what: str, smaller: str) -> None:
         )
 
 
-def check_simulation_memory(n_particles: int) -> None:
-    """``check_memory`` for one simulation of ``n_particles`` (``sim.n_particles``)."""
+def check_simulation_memory(n_particles: int, dim: int = 2) -> None:
+    """``check_memory`` for one simulation of ``n_particles`` (``sim.n_particles``) in ``dim``
+    dimensions."""
     check_memory(
-        simulation_bytes(n_particles),
-        f"a simulation of sim.n_particles={n_particles}",
+        simulation_bytes(n_particles, dim),
+        f"a {'3D ' if dim == 3 else ''}simulation of sim.n_particles={n_particles}",
         "lower sim.n_particles",
     )

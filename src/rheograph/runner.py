@@ -8,6 +8,9 @@ viscosity sigma * dt / d(strain) exceeds ``jam_viscosity`` (or whose strain went
 (between its last ``jam_intervals`` + 1 rows) together the apparent viscosity exceeds ``jam_viscosity``
 (or the strain did not advance): with the default 10 intervals, when the flow took longer than 0.1 strain
 would take at the jam viscosity and did not reach it.
+
+A 3D state point (``SimParams3D``) runs the same loop with ``Simulation3D``; under its rate control
+(``control="rate"``) rows follow the strain only and no jam is detected: the imposed rate cannot stall.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import h5py
 import numpy as np
 from tqdm import tqdm
 
-from rheograph.analysis import steady_state_summary
+from rheograph.analysis import steady_extras, steady_state_summary
 from rheograph.errors import hdf5_write_found_no_room
 from rheograph.io.hdf5 import (
     TrajectoryFile,
@@ -32,7 +35,9 @@ from rheograph.io.hdf5 import (
     read_run_info,
     rewrite,
 )
+from rheograph.sim import stress3d
 from rheograph.sim.integrator import Simulation, particle_pressure, viscosity
+from rheograph.sim.integrator3d import Simulation3D
 from rheograph.sim.params import SimParams
 
 
@@ -136,11 +141,12 @@ def run_state_point(
             compress_at_rest(path)  # a no-op, unless compressing failed last time (e.g. disk full)
             return finished
     traj = TrajectoryFile(path, params)
+    simulation = Simulation3D if params.DIM == 3 else Simulation
     if path.exists():
         state, counters = traj.open_existing()
-        sim = Simulation(params, state=state, solver=solver)
+        sim = simulation(params, state=state, solver=solver)
     else:
-        sim = Simulation(params, solver=solver)
+        sim = simulation(params, solver=solver)
         traj.open_new(sim.state)
         counters = {}
     traj.record_solver(sim.solver.name)
@@ -196,7 +202,10 @@ class _RunLoop:
         # window, the apparent viscosity exceeds jam_viscosity (a window, so that intermittent creep near
         # DST cannot reset the detector with a single flowing interval)
         self.jam_window = [tuple(w) for w in counters.get("jam_window", [])]
-        self.stall_time = params.output_interval * params.jam_viscosity / params.stress
+        self.rate_controlled = getattr(params, "control", "stress") == "rate"
+        # an imposed rate never stalls: its rows come by strain alone
+        stall_time = params.output_interval * params.jam_viscosity / params.stress
+        self.stall_time = math.inf if self.rate_controlled else stall_time
         self.start = wallclock.time()
         # CPU seconds of the run over all invocations, up to the last checkpoint (a killed invocation's
         # work after its last checkpoint is redone and counted once, as it is recomputed)
@@ -237,6 +246,7 @@ class _RunLoop:
         return self.cpu_before + wallclock.process_time() - self.cpu_start
 
     def stalled(self) -> bool:
+        # empty under rate control (``_row`` records no window): never stalled
         if len(self.jam_window) < self.params.jam_intervals:
             return False
         total_time = sum(w[0] for w in self.jam_window)
@@ -282,10 +292,11 @@ class _RunLoop:
 
     def _observables(self, result):
         n = self.sim.state.radii.shape[0]
+        three_d = self.params.DIM == 3
         return dict(
             shear_rate=result.shear_rate,
             viscosity=viscosity(result),
-            pressure=particle_pressure(result),
+            pressure=stress3d.particle_pressure(result.stress) if three_d else particle_pressure(result),
             z_mu=2.0 * result.n_frictional / n,
             z=2.0 * result.n_contacts / n,
         )
@@ -295,11 +306,13 @@ class _RunLoop:
         row_time, row_strain = before[0], before[1]
         d_strain = row_strain - self.last_row_strain
         jammed = False
-        if self.last_row_time > -math.inf:
+        if self.last_row_time > -math.inf and not self.rate_controlled:
             d_time = row_time - self.last_row_time
             jammed = flow_is_jammed(d_time, d_strain, p.stress, p.jam_viscosity)
             self.jam_window = (self.jam_window + [(d_time, d_strain)])[-p.jam_intervals :]
         obs = self._observables(result)
+        if p.DIM == 3:
+            obs["n1"], obs["n2"] = stress3d.normal_stress_differences(result.stress)
         self.traj.append_row(
             dict(
                 time=row_time,
@@ -354,6 +367,7 @@ def _summary(traj, params: SimParams, status: str, strain: float) -> dict:
         ts["z"],
         params.stress,
         params.steady_state_strain,
+        **steady_extras(params.to_dict(), ts),
     )
     summary["max_overlap"] = float(ts["max_overlap"].max()) if ts["max_overlap"].size else 0.0
     summary["jammed_fraction"] = float(ts["jammed"].mean()) if ts["jammed"].size else 0.0

@@ -36,7 +36,7 @@ from rheograph.graphs.features import (
     snapshot_edges,
     solve_viscosity,
 )
-from rheograph.io.configurations import Snapshots, wrap_into_box
+from rheograph.io.configurations import Snapshots, refuse_3d, wrap_into_box
 from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.io.snapshots import read_snapshots
 from rheograph.resources import check_memory, graph_bytes
@@ -247,6 +247,7 @@ def snapshot_graphs(
     graphs of its simulation are built). ``workers`` > 1: the snapshots (their one solve, relaxation and
     edges) are split between that many processes; the graphs are the same."""
     snaps = source if isinstance(source, Snapshots) else read_snapshots(source)
+    refuse_3d(snaps)
     path = snaps.source
     params = snaps.graph_params()
     needed = [

@@ -40,9 +40,10 @@ DAMAGED_FILE_ERRORS = (
 class Snapshots:
     """S configurations of one N-particle system at one state point, in rheograph's units and box.
 
-    ``positions`` (S, N, 2) [a] wrapped into the primary box; ``radii`` (N,) [a], smallest 1; ``lx``,
-    ``ly`` [a]; ``le_offset`` (S,) [a]; ``strain`` (S,) (NaN where the source does not say); ``stress``
-    σ/σ0; ``phi`` area fraction; ``params``: the physical parameters the source carries (a subset of
+    ``positions`` (S, N, 2) [a] wrapped into the primary box, (S, N, 3) for a 3D suspension (``dim`` 3,
+    cube edge ``lz`` [a]; None in 2D); ``radii`` (N,) [a], smallest 1; ``lx``, ``ly`` [a]; ``le_offset``
+    (S,) [a]; ``strain`` (S,) (NaN where the source does not say); ``stress`` σ/σ0; ``phi`` area (3D:
+    volume) fraction; ``params``: the physical parameters the source carries (a subset of
     ``PHYSICAL_PARAMS``); ``numerics``: the simulation step the source was made with, where known
     (``disp_max``, ``dt_max``, ``lagged_step_control``); ``targets`` (S, 3): η_r, Π [σ0], Z_μ (NaN where
     unknown); ``jammed`` (S,) bool (arrested packings, whose η_r is not a target); ``contacts``: per
@@ -67,10 +68,16 @@ class Snapshots:
     contacts: list | None = None
     position_noise: float | None = 0.0
     status: str = ""
+    lz: float | None = None
 
     @property
     def n_particles(self) -> int:
         return int(self.radii.size)
+
+    @property
+    def dim(self) -> int:
+        """Space dimension: 3 for spheres in a cube (``lz`` set), else 2."""
+        return 2 if self.lz is None else 3
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
@@ -95,6 +102,15 @@ def wrap_into_box(positions: np.ndarray, lx: float, ly: float, le_offset: float)
     return out
 
 
+def refuse_3d(snaps: Snapshots) -> None:
+    """Raises ``InputError`` for 3D snapshots: the graph builder and every surrogate are 2D."""
+    if snaps.dim != 2:
+        raise InputError(
+            f"{snaps.source}: 3D snapshots: no 3D model yet (graphs and surrogates are 2D; the file's "
+            "time series and snapshots are read with rheograph.read_snapshots / rheograph.io.hdf5)"
+        )
+
+
 def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generator) -> np.ndarray:
     """Snapshot ``k``'s positions (N, 2) [a] plus Gaussian noise of ``eps`` [a] per coordinate drawn from
     ``rng``, wrapped into the box (an imaging-grade copy of it)."""
@@ -111,9 +127,14 @@ def area_fraction(radii, lx: float, ly: float) -> float:
         return float(np.pi * np.sum(np.asarray(radii, dtype=np.float64) ** 2) / (lx * ly))
 
 
-def check_geometry(where: str, radii, lx, ly, phi) -> None:
+def volume_fraction(radii, lx: float, ly: float, lz: float) -> float:
+    with np.errstate(over="ignore"):
+        return float(4.0 * np.pi / 3.0 * np.sum(np.asarray(radii, dtype=np.float64) ** 3) / (lx * ly * lz))
+
+
+def check_geometry(where: str, radii, lx, ly, phi, lz: float | None = None) -> None:
     """Radii in units of the small radius, a positive box, and the stated φ equal to the one the radii
-    and box give (to 1e-3: files round it)."""
+    and box give (to 1e-3: files round it); a volume fraction where the box has a third edge ``lz``."""
     radii = np.asarray(radii, dtype=np.float64)
     if radii.ndim != 1 or radii.size < 2 or not np.all(np.isfinite(radii)) or radii.min() <= 0:
         raise InputError(f"{where}: radii must be (N,) positive numbers, N >= 2")
@@ -124,21 +145,27 @@ def check_geometry(where: str, radii, lx, ly, phi) -> None:
         )
     if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
         raise InputError(f"{where}: box must be two positive lengths (Lx, Ly) [a], found ({lx}, {ly})")
-    measured = area_fraction(radii, lx, ly)
+    if lz is None:
+        measured, fraction, box = area_fraction(radii, lx, ly), "an area", "(Lx, Ly)"
+    else:
+        if not (math.isfinite(lz) and lz > 0):
+            raise InputError(f"{where}: the box's third edge lz must be a positive length [a], found {lz}")
+        measured, fraction, box = volume_fraction(radii, lx, ly, lz), "a volume", "(Lx, Ly, Lz)"
     if not math.isclose(measured, phi, abs_tol=1e-3):
         raise InputError(
-            f"{where}: phi = {phi:g} but the radii and box give an area fraction {measured:.6g}: check the "
-            "box (Lx, Ly) and the radii's units"
+            f"{where}: phi = {phi:g} but the radii and box give {fraction} fraction {measured:.6g}: check "
+            f"the box {box} and the radii's units"
         )
 
 
-def check_configurations(where: str, positions, radii, le_offset, strain, targets) -> None:
-    """Positions (S, N, 2) [a] and offsets (S,) [a] finite, with N the radii's; strain (S,) and targets
+def check_configurations(where: str, positions, radii, le_offset, strain, targets, dim: int = 2) -> None:
+    """Positions (S, N, dim) [a] and offsets (S,) [a] finite, with N the radii's; strain (S,) and targets
     (S, 3) finite or NaN (unknown), never infinite: what a damaged file gives otherwise."""
     n_snap = len(positions)
-    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
+    if positions.ndim != 3 or positions.shape[1:] != (radii.size, dim):
         raise InputError(
-            f"{where}: positions must be (S, N, 2) with N = {radii.size} (the radii), found {positions.shape}"
+            f"{where}: positions must be (S, N, {dim}) with N = {radii.size} (the radii), found "
+            f"{positions.shape}"
         )
     if not np.all(np.isfinite(positions)):
         raise InputError(f"{where}: positions contain non-finite values")

@@ -1,11 +1,14 @@
 """Trajectory files: one HDF5 file per state point (schema in docs/data_format.md).
 
-Layout (schema_version 1):
+Layout (schema_version 1; D = 2, or 3 in a 3D run's file, which says so in its attrs dim and lz):
   /                attrs: schema_version, producer, status, params (each SimParams field), lx, ly
+                   (3D: also dim = 3, lz)
   /radii           (N,) particle radii [a]
-  /timeseries/*    one row per output step (resizable 1-D or (rows, 3) datasets)
-  /snapshots/*     one entry per snapshot: positions (S, N, 2), scalars, and the contact list flattened
-                   with contact_offset (S + 1,) indexing contact_pairs (M, 2), contact_state, contact_stretch
+  /timeseries/*    one row per output step (resizable 1-D or (rows, 3) datasets; (rows, 6) in 3D, which
+                   also has the normal stress differences n1, n2)
+  /snapshots/*     one entry per snapshot: positions (S, N, D), scalars, and the contact list flattened
+                   with contact_offset (S + 1,) indexing contact_pairs (M, 2), contact_state,
+                   contact_stretch (M, D)
   /checkpoint/*    the SimState needed to resume bit-for-bit, plus the row counts it is consistent with
   /summary         attrs: steady-state means and standard errors (written when the run ends)
 
@@ -28,7 +31,9 @@ import numpy as np
 
 from rheograph.errors import InputError, NoRoomError, hdf5_write_found_no_room
 from rheograph.sim.integrator import SimState
+from rheograph.sim.integrator3d import SimState3D
 from rheograph.sim.params import SimParams
+from rheograph.sim.params3d import params_from_mapping
 
 log = logging.getLogger("rheograph")
 
@@ -50,6 +55,14 @@ TIMESERIES_SCALARS = (
     "jammed",
 )
 TIMESERIES_TENSORS = ("stress", "stress_lubrication", "stress_contact", "stress_solvent")
+# 3D only: the normal stress differences N1 = sigma_xx - sigma_yy, N2 = sigma_yy - sigma_zz [sigma0]
+# (in 2D sigma_zz = 0 by convention, so N2 would be no measurement)
+TIMESERIES_SCALARS_3D = (*TIMESERIES_SCALARS, "n1", "n2")
+# stored components of the symmetric stress tensors (upper triangle)
+TENSOR_COMPONENTS = {
+    2: "xx, xy, yy (sigma_zz = 0); stresses in sigma0",
+    3: "xx, xy, xz, yy, yz, zz; stresses in sigma0",
+}
 SNAPSHOT_SCALARS = ("time", "strain", "le_offset", "shear_rate", "viscosity", "pressure", "z_mu", "z")
 # parameters that may change between invocations of the same run (they do not alter the physics)
 RESUMABLE_PARAMS = {"strain", "max_wall_seconds", "checkpoint_wall_seconds", "jam_intervals"}
@@ -140,6 +153,16 @@ def _unused_name(path: Path) -> Path:
     return candidate
 
 
+def file_dim(h5: h5py.File) -> int:
+    """Space dimension of an open trajectory file: its attribute ``dim``, absent (2) in 2D files."""
+    return int(h5.attrs.get("dim", 2))
+
+
+def timeseries_scalars(dim: int) -> tuple[str, ...]:
+    """The scalar time-series columns of a ``dim``-dimensional run."""
+    return TIMESERIES_SCALARS_3D if dim == 3 else TIMESERIES_SCALARS
+
+
 def _append(ds: h5py.Dataset, values) -> None:
     values = np.asarray(values, dtype=ds.dtype)
     n = ds.shape[0]
@@ -206,24 +229,35 @@ class TrajectoryFile:
                 h5.attrs[f"param_{key}"] = value
             h5.attrs["lx"] = state.lx
             h5.attrs["ly"] = state.ly
+            dim = self.params.DIM
+            if dim == 3:  # 2D files stay as they were written before 3D existed: no dim means 2
+                h5.attrs["dim"] = dim
+                h5.attrs["lz"] = state.lz
             h5.create_dataset("radii", data=state.radii)
             n = state.radii.shape[0]
+            components = dim * (dim + 1) // 2
             ts = h5.create_group("timeseries")
-            for name in TIMESERIES_SCALARS:
+            for name in timeseries_scalars(dim):
                 dtype = np.int64 if name == "steps" else (np.bool_ if name == "jammed" else np.float64)
                 ts.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(1024,))
             for name in TIMESERIES_TENSORS:
-                ts.create_dataset(name, shape=(0, 3), maxshape=(None, 3), dtype=np.float64, chunks=(1024, 3))
-            ts.attrs["tensor_components"] = "xx, xy, yy (sigma_zz = 0); stresses in sigma0"
+                ts.create_dataset(
+                    name,
+                    shape=(0, components),
+                    maxshape=(None, components),
+                    dtype=np.float64,
+                    chunks=(1024, components),
+                )
+            ts.attrs["tensor_components"] = TENSOR_COMPONENTS[dim]
             sn = h5.create_group("snapshots")
             for name in SNAPSHOT_SCALARS:
                 sn.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,))
             sn.create_dataset(
                 "positions",
-                shape=(0, n, 2),
-                maxshape=(None, n, 2),
+                shape=(0, n, dim),
+                maxshape=(None, n, dim),
                 dtype=WRITER_DTYPES["snapshots/positions"],
-                chunks=(1, n, 2),
+                chunks=(1, n, dim),
             )
             sn.create_dataset(
                 "contact_offset",
@@ -241,10 +275,10 @@ class TrajectoryFile:
             sn.create_dataset("contact_state", shape=(0,), maxshape=(None,), dtype=np.int8, chunks=(1024,))
             sn.create_dataset(
                 "contact_stretch",
-                shape=(0, 2),
-                maxshape=(None, 2),
+                shape=(0, dim),
+                maxshape=(None, dim),
                 dtype=WRITER_DTYPES["snapshots/contact_stretch"],
-                chunks=(1024, 2),
+                chunks=(1024, dim),
             )
         self.h5 = h5py.File(tmp, "r+")
         self.write_checkpoint(state, {})
@@ -346,7 +380,11 @@ class TrajectoryFile:
             mine = self.params.to_dict()
             differ = params_that_differ(stored, self.params)
             if differ:
-                detail = ", ".join(f"{k}: file {stored.get(k)!r} vs requested {mine[k]!r}" for k in differ)
+                requested = {"dim": self.params.DIM, **mine}
+                detail = ", ".join(
+                    f"{k}: file {stored.get(k, 2 if k == 'dim' else None)!r} vs requested {requested[k]!r}"
+                    for k in differ
+                )
                 raise TrajectoryFileError(f"{self.path} belongs to another state point ({detail})")
             cp = h5["checkpoint"]
             if "positions" not in cp:
@@ -354,7 +392,7 @@ class TrajectoryFile:
             state = _state_from_checkpoint(cp)
             counters = json.loads(cp.attrs["counters"])
             # drop rows written after the checkpoint: they will be recomputed identically
-            for name in TIMESERIES_SCALARS + TIMESERIES_TENSORS:
+            for name in timeseries_scalars(file_dim(h5)) + TIMESERIES_TENSORS:
                 h5["timeseries"][name].resize(counters["rows"], axis=0)
             sn = h5["snapshots"]
             for name in (*SNAPSHOT_SCALARS, "positions"):
@@ -379,7 +417,7 @@ class TrajectoryFile:
     # ---- writing ------------------------------------------------------------------------------
     def append_row(self, row: dict) -> None:
         ts = self.h5["timeseries"]
-        for name in TIMESERIES_SCALARS:
+        for name in timeseries_scalars(self.params.DIM):
             _append(ts[name], [row[name]])
         for name in TIMESERIES_TENSORS:
             _append(ts[name], [row[name]])
@@ -394,7 +432,7 @@ class TrajectoryFile:
         _append(sn["contact_stretch"], snap["contact_stretch"])
         _append(sn["contact_offset"], [sn["contact_pairs"].shape[0]])
 
-    def write_checkpoint(self, state: SimState, counters: dict) -> None:
+    def write_checkpoint(self, state: SimState | SimState3D, counters: dict) -> None:
         counters = {
             "rows": self.h5["timeseries"]["time"].shape[0],
             "snapshots": self.h5["snapshots"]["time"].shape[0],
@@ -405,9 +443,9 @@ class TrajectoryFile:
         if "checkpoint_new" in self.h5:
             del self.h5["checkpoint_new"]
         cp = self.h5.create_group("checkpoint_new")
-        for name in SimState.ARRAYS:
+        for name in state.ARRAYS:
             cp.create_dataset(name, data=getattr(state, name))
-        for name in SimState.SCALARS:
+        for name in state.SCALARS:
             cp.attrs[name] = getattr(state, name)
         cp.attrs["counters"] = json.dumps(counters)
         self.h5.flush()
@@ -459,9 +497,12 @@ def read_timeseries(path: str | Path) -> dict:
 def params_that_differ(stored: dict, params: SimParams) -> list[str]:
     """Names of the parameters of ``params`` that differ from those ``stored`` in a trajectory file, other
     than RESUMABLE_PARAMS: a file of another state point.  A parameter added after the file was written
-    had its default value there."""
-    defaults, mine = SimParams.defaults(), params.to_dict()
-    return sorted(k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k])
+    had its default value there; ``dim`` is compared too (a 2D file stores none: 2)."""
+    defaults, mine = type(params).defaults(), params.to_dict()
+    differ = {k for k in mine if k not in RESUMABLE_PARAMS and stored.get(k, defaults[k]) != mine[k]}
+    if stored.get("dim", 2) != params.DIM:
+        differ.add("dim")
+    return sorted(differ)
 
 
 def read_params(path: str | Path) -> dict:
@@ -470,31 +511,32 @@ def read_params(path: str | Path) -> dict:
         return json.loads(h5.attrs["params"])
 
 
-def read_checkpoint(path: str | Path) -> tuple[SimParams, SimState]:
+def read_checkpoint(path: str | Path) -> tuple[SimParams, SimState | SimState3D]:
     """The parameters and the exact state at the checkpoint of a trajectory file, read only (the file is
-    left as it is: for analyses that continue a run without extending it)."""
+    left as it is: for analyses that continue a run without extending it); 3D states for 3D files."""
     with h5py.File(path, "r") as h5:
         if "checkpoint" not in h5 or "positions" not in h5["checkpoint"]:
             raise TrajectoryFileError(f"{path}: no checkpoint")
-        return SimParams.from_mapping(json.loads(h5.attrs["params"])), _state_from_checkpoint(
-            h5["checkpoint"]
-        )
+        return params_from_mapping(json.loads(h5.attrs["params"])), _state_from_checkpoint(h5["checkpoint"])
 
 
-def _state_from_checkpoint(cp: h5py.Group) -> SimState:
-    state = SimState(
-        **{name: cp[name][()] for name in SimState.ARRAYS},
-        **{name: cp.attrs[name] for name in SimState.SCALARS if name in cp.attrs},
+def _state_from_checkpoint(cp: h5py.Group) -> SimState | SimState3D:
+    """The state saved in a checkpoint group; a 3D one in a 3D file."""
+    cls = SimState3D if file_dim(cp.file) == 3 else SimState
+    state = cls(
+        **{name: cp[name][()] for name in cls.ARRAYS},
+        **{name: cp.attrs[name] for name in cls.SCALARS if name in cp.attrs},
     )
     state.steps = int(state.steps)
     return state
 
 
 def read_run_info(path: str | Path) -> dict:
-    """Status, parameters, summary and progress (strain and steps at the checkpoint) of a trajectory
-    file, read only."""
+    """Status, parameters, summary, progress (strain and steps at the checkpoint) and space dimension of a
+    trajectory file, read only."""
     with h5py.File(path, "r") as h5:
         return {
+            "dim": file_dim(h5),
             "status": str(h5.attrs["status"]),
             "params": json.loads(h5.attrs["params"]),
             "summary": dict(h5["summary"].attrs) if "summary" in h5 else {},

@@ -4,7 +4,8 @@ one in-memory form (``Snapshots``) that graph building and prediction take.
 Three kinds of source (``read_snapshots`` tells them apart by their content and name):
 
 * a **rheograph trajectory** (HDF5 with ``/snapshots``, docs/data_format.md), finished, jammed, still
-  being written (then its copy as of the last checkpoint is read) or stripped of its time series;
+  being written (then its copy as of the last checkpoint is read) or stripped of its time series; 2D, or
+  3D (root attribute ``dim`` 3: positions (S, N, 3) and the cube edge ``lz``);
 * a **bare snapshot file** (``.npz``, or HDF5 with the same keys as datasets or root attributes):
   ``positions`` (S, N, 2) or (N, 2) [a], ``radii`` (N,) [a], ``box`` (2,) = (Lx, Ly) [a], ``le_offset``
   (S,) or a scalar [a] (x-shift of the periodic image above, y + Ly), ``stress`` (σ/σ0), ``phi``, and the
@@ -44,6 +45,7 @@ from rheograph.io.configurations import (
 from rheograph.io.hdf5 import (
     SCHEMA_VERSION,
     TrajectoryFileError,
+    file_dim,
     jammed_snapshots,
     last_checkpoint_copy,
     read_run_info,
@@ -99,10 +101,12 @@ def read_trajectory(path: str | Path) -> Snapshots:
         for key in ("stress", "phi"):
             if key not in params:
                 raise InputError(f"{path}: its params lack '{key}' (the state point): add it to the file")
-        for key in ("lx", "ly"):
+        dim = file_dim(h5)
+        for key in ("lx", "ly", "lz") if dim == 3 else ("lx", "ly"):
             if key not in h5.attrs:
                 raise InputError(f"{path}: no root attribute '{key}' (box length [a])")
         lx, ly = float(h5.attrs["lx"]), float(h5.attrs["ly"])
+        lz = float(h5.attrs["lz"]) if dim == 3 else None
         radii = _numbers({"radii": h5["radii"][()]}, "radii", str(path))
         sn = h5["snapshots"]
         count = sn["positions"].shape[0]
@@ -145,8 +149,8 @@ def read_trajectory(path: str | Path) -> Snapshots:
                 for k in range(min(count, offset.size - 1))
             ]
     phi, stress = _scalar(params, "phi", str(path)), _scalar(params, "stress", str(path))
-    check_geometry(str(path), radii, lx, ly, phi)
-    check_configurations(str(path), positions, radii, offsets, strain, targets)
+    check_geometry(str(path), radii, lx, ly, phi, lz)
+    check_configurations(str(path), positions, radii, offsets, strain, targets, dim)
     physical = {k: _scalar(params, k, f"{path}: params") for k in PHYSICAL_PARAMS if k in params}
     numerics = {k: params[k] for k in ("disp_max", "dt_max", "lagged_step_control") if k in params}
     return Snapshots(
@@ -166,6 +170,7 @@ def read_trajectory(path: str | Path) -> Snapshots:
         numerics=numerics,
         contacts=contacts,
         status=status,
+        lz=lz,
     )
 
 

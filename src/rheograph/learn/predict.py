@@ -53,7 +53,7 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
-from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots
+from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots, refuse_3d
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values
 from rheograph.learn.bundle import load_bundle, predict_dataset
 from rheograph.learn.error_model import error_bounds, predicted_error, read_error_model
@@ -313,6 +313,7 @@ class Surrogate:
 
     def predict_snapshots(self, snaps: Snapshots, accept_mismatch: bool = False) -> dict:
         """One row per snapshot of ``snaps``: a dict of (S,) columns (module docstring)."""
+        refuse_3d(snaps)
         if round(snaps.params.get("size_ratio", 0.0), 6) not in self.domain["size_ratio"]:
             raise InputError(
                 f"{snaps.source}: size ratio {snaps.params.get('size_ratio')} but model {self.label} was "

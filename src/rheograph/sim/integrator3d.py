@@ -16,13 +16,14 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from rheograph.resources import check_simulation_memory
 from rheograph.sim import contacts3d
 from rheograph.sim.assembly import build_pattern
 from rheograph.sim.assembly3d import UNIT_STRAIN_RATE, assemble_resistance
 from rheograph.sim.geometry import wrap_offset
 from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry, wrap_positions
 from rheograph.sim.init_config3d import initial_configuration
-from rheograph.sim.integrator import DT_GROWTH, StepResult, _transfer_contacts
+from rheograph.sim.integrator import DT_GROWTH, SimState, StepResult, _transfer_contacts
 from rheograph.sim.lubrication import lubrication_resistance
 from rheograph.sim.lubrication3d import one_body_drag
 from rheograph.sim.params3d import SimParams3D
@@ -59,6 +60,10 @@ class SimState3D:
     strain_at_build: float = 0.0
     dt_assumed: float = 0.0
     previous_interaction_speed: float = -1.0
+
+    # what a checkpoint holds (rheograph.io.hdf5): the 2D state's names, with the cube's third edge
+    ARRAYS = SimState.ARRAYS
+    SCALARS = (*SimState.SCALARS[:2], "lz", *SimState.SCALARS[2:])
 
 
 class LinearProblem3D(NamedTuple):
@@ -210,6 +215,8 @@ class Simulation3D:
 
     def __init__(self, params: SimParams3D, state: SimState3D | None = None, solver: str = "auto"):
         self.params = params
+        # refused before the initial configuration or any matrix is allocated
+        check_simulation_memory(params.n_particles, dim=3)
         if state is None:
             pos, radii, box = initial_configuration(params)
             state = SimState3D(positions=pos, radii=radii, lx=box, ly=box, lz=box)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from rheograph.sim.params import ParameterError, SimParams
 
 CONTROLS = ("stress", "rate")
+DIMENSIONS = (2, 3)
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,7 @@ class SimParams3D(SimParams):
     PHI_MAX = 0.64
     PHI_RULE = "0 < phi <= 0.64 (random close packing of spheres)"
 
+    dim: int = 3  # space dimension: recorded with the parameters, so that a file says what it holds
     phi: float = 0.55  # volume fraction sum(4 pi a_i^3 / 3) / (Lx Ly Lz)
     control: str = "stress"  # "stress" (imposed sigma_xy) or "rate" (imposed shear rate)
     shear_rate: float = 1.0  # imposed shear rate under rate control [gamma0_dot]; unused under stress
@@ -49,9 +51,31 @@ class SimParams3D(SimParams):
 
     def validate(self) -> None:
         super().validate()
+        if self.dim != 3:
+            raise ParameterError(f"sim.dim={self.dim!r} is invalid for SimParams3D: allowed 3")
         if self.control not in CONTROLS:
             raise ParameterError(f"sim.control={self.control!r} is invalid: allowed one of {CONTROLS}")
         if not (math.isfinite(self.shear_rate) and self.shear_rate > 0.0):
             raise ParameterError(
                 f"sim.shear_rate={self.shear_rate!r} is invalid: allowed shear_rate > 0 (gamma0_dot)"
             )
+
+
+def params_from_mapping(mapping) -> SimParams:
+    """The parameters of a ``sim`` mapping (a Hydra ``sim`` node, a file's stored params): ``SimParams3D``
+    where ``dim`` is 3, else ``SimParams`` (no ``dim``, or 2: files and configs written before 3D existed
+    carry none).  Raises ``ParameterError`` for another ``dim`` and for the rate-control keys in 2D."""
+    mapping = dict(mapping)
+    dim = mapping.get("dim", 2)
+    if dim not in DIMENSIONS or isinstance(dim, bool):
+        raise ParameterError(f"sim.dim={dim!r} is invalid: allowed one of {DIMENSIONS} (sim=3d for 3D)")
+    if dim == 3:
+        return SimParams3D.from_mapping(mapping)
+    mapping.pop("dim", None)
+    rate_keys = sorted({"control", "shear_rate"} & set(mapping))
+    if rate_keys:
+        # the 2D simulator imposes the stress only: refused rather than ignored
+        raise ParameterError(
+            f"sim.{rate_keys[0]} is a 3D setting (sim=3d): 2D runs are stress-controlled (sim.stress)"
+        )
+    return SimParams.from_mapping(mapping)

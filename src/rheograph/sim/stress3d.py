@@ -154,3 +154,9 @@ def stress_unit_factor(lx: float, ly: float, lz: float) -> float:
 def particle_pressure(stress: np.ndarray) -> float:
     """Pi = -(sigma_xx + sigma_yy + sigma_zz) / 3 of a stress (6,) in upper-triangle storage."""
     return -(stress[XX] + stress[YY] + stress[ZZ]) / 3.0
+
+
+def normal_stress_differences(stress: np.ndarray) -> tuple[float, float]:
+    """(N1, N2) = (sigma_xx - sigma_yy, sigma_yy - sigma_zz) [sigma0] of a stress (6,) in upper-triangle
+    storage (x the flow, y the gradient, z the vorticity direction)."""
+    return float(stress[XX] - stress[YY]), float(stress[YY] - stress[ZZ])
