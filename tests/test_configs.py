@@ -13,7 +13,7 @@ from omegaconf import OmegaConf
 
 from rheograph.cli import register_resolvers
 from rheograph.errors import InputError
-from rheograph.sim.params import SimParams
+from rheograph.sim.params3d import params_from_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPAIGNS = sorted(p.stem for p in (ROOT / "conf" / "campaign").glob("*.yaml"))
@@ -29,7 +29,7 @@ def sweep(name: str):
         sim = OmegaConf.to_container(cfg.sim, resolve=True)
         sim.update({k.removeprefix("sim."): float(v) for k, v in zip(params, values)})
         sim["seed"] = int(sim["seed"])
-        yield SimParams.from_mapping(sim)
+        yield params_from_mapping(sim)  # SimParams, or SimParams3D for a 3D campaign
 
 
 def test_the_two_groups_hold_what_their_entry_point_runs():
@@ -65,7 +65,7 @@ def test_an_entry_point_refuses_the_other_ones_group(config, override, group):
 
 @pytest.mark.parametrize("name", CAMPAIGNS)
 def test_campaigns_sweep_valid_state_points(name):
-    points = list(sweep(name))  # SimParams.from_mapping refuses an invalid one
+    points = list(sweep(name))  # params_from_mapping refuses an invalid one
     assert points
     if name.startswith("dataset_"):
         for p in points:
