@@ -155,7 +155,7 @@ def test_a_killed_graph_build_resumes_from_the_files_it_finished(tiny_files, tmp
     [
         ("simulate.py", "sim.phii=0.76", ["sim.phii: no such setting", "did you mean sim.phi?"]),
         ("train.py", "data.phii=0.7", ["data.phii: no such setting", "did you mean data.phi?"]),
-        ("simulate.py", "sim=n4000", ["sim/n4000", "the options are: lfdem, n2000, n400, tiny"]),
+        ("simulate.py", "sim=n4000", ["sim/n4000", "the options are: 3d, lfdem, n2000, n400, tiny"]),
         ("train.py", "model=resgcnn", ["model/resgcnn", "resgcn, resgcn_physics"]),
         ("simulate.py", "sim.phi=[1,2", ["sim.phi=[1,2:"]),
         ("simulate.py", "--cfg=hydra -m", ["Only one of --run, --multirun, --cfg"]),

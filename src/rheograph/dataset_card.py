@@ -216,7 +216,7 @@ def card_markdown(
     lines = [
         f"# {title}",
         "",
-        *(three_d if any(r["dim"] == 3 for r in records) else []),
+        *(three_d if any(r.get("dim", 2) == 3 for r in records) else []),  # records without dim: 2D
         "Regenerate (resumable; finished state points are skipped):",
         "",
         "```bash",
