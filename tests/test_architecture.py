@@ -83,3 +83,14 @@ def test_a_planted_cycle_is_found():
     graph.add_import(importer="pkg.c", imported="pkg.a")
     graph.add_import(importer="pkg.d", imported="pkg.a")
     assert import_cycles(graph) == [["pkg.a", "pkg.b", "pkg.c"]]
+
+
+def test_file_formats_are_read_and_written_in_io_only():
+    """``h5py`` is imported by ``rheograph.io`` alone: everything else reads and writes runs through it."""
+    sys.path.insert(0, str(ROOT / "src"))
+    try:
+        graph = grimp.build_graph("rheograph", include_external_packages=True, cache_dir=None)
+    finally:
+        sys.path.remove(str(ROOT / "src"))
+    importers = graph.find_modules_that_directly_import("h5py")
+    assert importers and all(m.startswith("rheograph.io.") for m in importers), sorted(importers)

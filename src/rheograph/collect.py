@@ -14,10 +14,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import h5py
-
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.hdf5 import is_compact, rewrite
+from rheograph.io.hdf5 import file_is_compact, rewrite
 from rheograph.io.index import USABLE, build_index, write_index
 
 
@@ -41,9 +39,8 @@ def main(argv=None) -> None:
         saved = 0
         for entry in index["runs"]:
             try:
-                with h5py.File(entry["path"], "r") as h5:
-                    if is_compact(h5):
-                        continue
+                if file_is_compact(entry["path"]):
+                    continue
                 before, after = rewrite(entry["path"], compressed=True)
             except OSError as exc:  # being written by a running simulation (HDF5 file lock)
                 print(f"  not compacted {entry['path']}: {exc}")

@@ -11,12 +11,10 @@ and ``index.json`` (``rheograph.collect``) into the data directory.
 from __future__ import annotations
 
 import argparse
-import json
 import re
 from collections import defaultdict
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from rheograph.analysis import (
@@ -27,7 +25,7 @@ from rheograph.analysis import (
 )
 from rheograph.errors import InputError, one_line_errors
 from rheograph.flowcurve import collect
-from rheograph.io.hdf5 import jammed_snapshots
+from rheograph.io.hdf5 import jammed_snapshots, read_run_info, read_snapshot_table, read_timeseries
 from rheograph.io.index import USABLE, build_index, write_index
 from rheograph.sim.params import SimParams
 
@@ -48,9 +46,9 @@ def run_cpu_seconds(path: str | Path) -> float:
     recorded, the seconds that simulate.log reports over all invocations (single-threaded runs, one per
     core, so wall time is CPU time).  NaN when neither exists."""
     path = Path(path)
-    with h5py.File(path, "r") as h5:
-        if "summary" in h5 and "cpu_seconds" in h5["summary"].attrs:
-            return float(h5["summary"].attrs["cpu_seconds"])
+    summary = read_run_info(path)["summary"]
+    if "cpu_seconds" in summary:
+        return float(summary["cpu_seconds"])
     log = path.parent / "simulate.log"
     if not log.exists():
         return float("nan")
@@ -60,14 +58,12 @@ def run_cpu_seconds(path: str | Path) -> float:
 def cpu_seconds_per_decorrelated_snapshot(path: str | Path) -> float:
     """What one independent snapshot of a run cost the simulator: its CPU seconds per unit strain reached
     x the 1/e decorrelation strain of log eta_r over the steady window (at least one output interval)."""
-    with h5py.File(path, "r") as h5:
-        strain = float(h5["checkpoint"].attrs["strain"])
-        ts = h5["timeseries"]
-        params = json.loads(h5.attrs["params"])
-        steady = ts["strain"][()] >= float(params["steady_state_strain"])
-        interval = float(params["output_interval"])
-        tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][()][steady])), interval)
-    return run_cpu_seconds(path) / strain * max(tau, interval)
+    info, ts = read_run_info(path), read_timeseries(path)
+    params = info["params"]
+    steady = ts["strain"] >= float(params["steady_state_strain"])
+    interval = float(params["output_interval"])
+    tau = decorrelation_strain(np.log(np.abs(ts["viscosity"][steady])), interval)
+    return run_cpu_seconds(path) / info["strain"] * max(tau, interval)
 
 
 def run_records(index: dict, min_strain: float) -> list[dict]:
@@ -77,27 +73,27 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
     for entry in index["runs"]:
         path = Path(entry["path"])
         p = entry["params"]
-        with h5py.File(path, "r") as h5:
-            ts, sn = h5["timeseries"], h5["snapshots"]
-            strain = ts["strain"][()]
-            series = {
-                "viscosity": np.log(np.abs(ts["viscosity"][()]) + 1e-12),
-                "pressure": ts["pressure"][()],
-                "z_mu": ts["z_mu"][()],
-            }
-            snap_strain = sn["strain"][()]
-            # an unfinished run whose last rows are each slower than jam_viscosity: stalling, not yet
-            # called jammed (the detector's window is not full); the strain where the stall began
-            slow = ts["jammed"][()] if "jammed" in ts else np.zeros(strain.size, dtype=bool)
-            stalled_since = stall_start(strain, slow) if entry["status"] not in USABLE else None
-            jammed = jammed_snapshots(
-                entry["status"], snap_strain, strain, p.get("jam_intervals", SimParams.jam_intervals)
-            )
-            # as the learning reads them: flowing after the transient, arrested packings at any strain
-            flowing_snaps = (snap_strain >= min_strain) & ~jammed
-            snaps = {k: sn[k][()][flowing_snaps] for k in (*TARGETS, "shear_rate")}
-            # the static packing under load: what a run that arrested before the steady window reports
-            arrested = {k: sn[k][()][jammed] for k in ("pressure", "z_mu")}
+        ts = read_timeseries(path)
+        sn = read_snapshot_table(path, ("strain", *TARGETS, "shear_rate"))
+        strain = ts["strain"]
+        series = {
+            "viscosity": np.log(np.abs(ts["viscosity"]) + 1e-12),
+            "pressure": ts["pressure"],
+            "z_mu": ts["z_mu"],
+        }
+        snap_strain = sn["strain"]
+        # an unfinished run whose last rows are each slower than jam_viscosity: stalling, not yet
+        # called jammed (the detector's window is not full); the strain where the stall began
+        slow = ts["jammed"] if "jammed" in ts else np.zeros(strain.size, dtype=bool)
+        stalled_since = stall_start(strain, slow) if entry["status"] not in USABLE else None
+        jammed = jammed_snapshots(
+            entry["status"], snap_strain, strain, p.get("jam_intervals", SimParams.jam_intervals)
+        )
+        # as the learning reads them: flowing after the transient, arrested packings at any strain
+        flowing_snaps = (snap_strain >= min_strain) & ~jammed
+        snaps = {k: sn[k][flowing_snaps] for k in (*TARGETS, "shear_rate")}
+        # the static packing under load: what a run that arrested before the steady window reports
+        arrested = {k: sn[k][jammed] for k in ("pressure", "z_mu")}
         cpu = run_cpu_seconds(path)
         steady = strain >= p["steady_state_strain"]
         flowing = entry["status"] != "jammed"

@@ -20,13 +20,12 @@ import re
 from collections import defaultdict
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from rheograph.analysis import steady_extras, steady_state_summary
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.configurations import DAMAGED_FILE_ERRORS
-from rheograph.io.hdf5 import PRODUCER, read_run_info, read_timeseries
+from rheograph.io.hdf5 import is_trajectory, read_run_info, read_timeseries
 from rheograph.io.lfdem import read_lfdem_data
 from rheograph.sim.params import scheme_name
 
@@ -34,14 +33,6 @@ KEYS = ("viscosity", "pressure", "z_mu", "z")
 # runs whose steady-state window is averaged: finished ones, and runs stopped early (wall-clock limit or
 # interruption), which the table flags through their status and reached strain
 PARTIAL_OR_DONE = ("completed", "wall_limit", "interrupted")
-
-
-def _is_trajectory(path: Path) -> bool:
-    try:
-        with h5py.File(path, "r") as h5:
-            return h5.attrs.get("producer") == PRODUCER
-    except OSError:
-        return False
 
 
 def collect(directories) -> list[dict]:
@@ -52,7 +43,7 @@ def collect(directories) -> list[dict]:
     groups = defaultdict(dict)
     for directory in directories:
         for path in sorted(Path(directory).rglob("*.h5")):
-            if not _is_trajectory(path):
+            if not is_trajectory(path):
                 continue
             try:
                 info = read_run_info(path)

@@ -21,7 +21,6 @@ import time as wallclock
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 import numpy as np
 from tqdm import tqdm
 
@@ -30,7 +29,7 @@ from rheograph.errors import hdf5_write_found_no_room
 from rheograph.io.hdf5 import (
     TrajectoryFile,
     TrajectoryWriteError,
-    is_compact,
+    file_is_compact,
     params_that_differ,
     read_run_info,
     rewrite,
@@ -100,9 +99,7 @@ def compress_at_rest(path: Path) -> None:
     """Compress a finished trajectory (rheograph.io.hdf5.COMPRESSION: raw while running, compressed at
     rest); a file already compressed is left as it is, so rerunning a finished state point changes
     nothing."""
-    with h5py.File(path, "r") as h5:
-        done = is_compact(h5)
-    if not done:
+    if not file_is_compact(path):
         rewrite(path, compressed=True)
 
 

@@ -494,6 +494,29 @@ def read_timeseries(path: str | Path) -> dict:
         return {name: h5["timeseries"][name][()] for name in h5["timeseries"]}
 
 
+def read_snapshot_table(path: str | Path, keys) -> dict:
+    """The per-snapshot columns ``keys`` of a trajectory's ``/snapshots`` (strain, eta_r, pressure, ...),
+    each (S,), read only."""
+    with h5py.File(path, "r") as h5:
+        return {key: h5["snapshots"][key][()] for key in keys}
+
+
+def is_trajectory(path: str | Path) -> bool:
+    """Whether ``path`` is a rheograph trajectory file (HDF5 written by this package); False for anything
+    else, or a file that cannot be opened."""
+    try:
+        with h5py.File(path, "r") as h5:
+            return h5.attrs.get("producer") == PRODUCER
+    except OSError:
+        return False
+
+
+def file_is_compact(path: str | Path) -> bool:
+    """Whether the trajectory file at ``path`` has the at-rest layout (``is_compact``)."""
+    with h5py.File(path, "r") as h5:
+        return is_compact(h5)
+
+
 def params_that_differ(stored: dict, params: SimParams) -> list[str]:
     """Names of the parameters of ``params`` that differ from those ``stored`` in a trajectory file, other
     than RESUMABLE_PARAMS: a file of another state point.  A parameter added after the file was written

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import collections
-import csv
 import dataclasses
 import math
 import sys
@@ -55,6 +54,7 @@ from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
 from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots, refuse_3d
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values
+from rheograph.io.tables import write_table
 from rheograph.learn.bundle import load_bundle, predict_dataset
 from rheograph.learn.error_model import error_bounds, predicted_error, read_error_model
 from rheograph.learn.jamming import jammed_fraction
@@ -507,40 +507,6 @@ def concatenate(tables: list[dict]) -> dict:
                 parts.append(np.full(n, np.nan))
         out[c] = np.concatenate(parts)
     return out
-
-
-def write_table(table: dict, out: Path, header: dict) -> None:
-    """CSV (``#``-comment lines with ``header`` first) or HDF5 (``header`` as attributes), through a
-    temporary file: ``out`` appears whole or not at all."""
-    tmp = out.with_name(out.name + ".tmp")
-    try:
-        _write_table(table, tmp, out.suffix, header)
-        tmp.replace(out)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _write_table(table: dict, out: Path, suffix: str, header: dict) -> None:
-    if suffix == ".h5":
-        import h5py
-
-        with h5py.File(out, "w") as h5:
-            for key, value in table.items():
-                if value.dtype.kind == "U":  # variable-length UTF-8 (paths and notes may be non-ASCII)
-                    h5.create_dataset(key, data=value.astype(object), dtype=h5py.string_dtype())
-                else:
-                    h5[key] = value
-            for key, value in header.items():
-                h5.attrs[key] = value
-        return
-    with open(out, "w", newline="") as fh:
-        for key, value in header.items():
-            fh.write(f"# {key}: {value}\n")
-        writer = csv.writer(fh)
-        columns = list(table)
-        writer.writerow(columns)
-        for row in zip(*(table[c] for c in columns)):
-            writer.writerow([f"{v:.9g}" if isinstance(v, float | np.floating) else v for v in row])
 
 
 def main(argv=None) -> None:
