@@ -18,6 +18,7 @@ import h5py
 from rheograph.errors import InputError
 from rheograph.io.configurations import DAMAGED_FILE_ERRORS
 from rheograph.io.hdf5 import PRODUCER, read_run_info
+from rheograph.io.json_files import read_json
 
 USABLE = ("completed", "jammed")
 
@@ -67,10 +68,7 @@ def write_index(index: dict, path: str | Path) -> None:
 def read_index(path: str | Path) -> dict:
     """An index written by :func:`write_index`, its paths resolved against the index's directory."""
     path = Path(path)
-    try:
-        index = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: not a readable rheograph index ({exc})") from exc
+    index = read_json(path, "rheograph index")
     if not isinstance(index, dict) or index.get("format") != "rheograph-index-1":
         raise InputError(f"{path}: not a rheograph index")
     for entry in index["runs"]:

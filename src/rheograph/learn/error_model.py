@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from rheograph.errors import InputError
+from rheograph.io.json_files import read_json
 from rheograph.learn.module import LOG_TARGETS, TARGET_NAMES
 
 FILENAME = "error_model.json"
@@ -111,10 +112,7 @@ def read_error_model(run_dir: Path) -> dict | None:
     path = Path(run_dir) / FILENAME
     if not path.exists():
         return None
-    try:
-        model = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: not a readable error model ({exc}); is the model folder damaged?") from exc
+    model = read_json(path, "error model", "; is the model folder damaged?")
     problem = _error_model_problem(model)
     if problem:
         raise InputError(f"{path}: not an error model ({problem}); is the model folder damaged?")

@@ -22,6 +22,7 @@ import shutil
 from pathlib import Path
 
 from rheograph.errors import InputError
+from rheograph.io.json_files import read_json
 from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
@@ -70,10 +71,7 @@ def read_card(paths: list[Path]) -> dict | None:
     path = paths[0].parent / "card.json"
     if not path.is_file():
         return None
-    try:
-        card = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: not a readable model card ({exc}); is the model folder damaged?") from exc
+    card = read_json(path, "model card", "; is the model folder damaged?")
     domain = card.get("domain") if isinstance(card, dict) else None
     noise = card.get("position_noise") if isinstance(card, dict) else None
     if not (
