@@ -193,7 +193,7 @@ def test_a_2d_run_writes_the_file_it_wrote_before_3d_existed(tmp_path):
         strain, viscosity = h5["timeseries/strain"][-1], h5["summary"].attrs["viscosity"]
         steps = int(h5["checkpoint"].attrs["steps"])
     assert layout == LAYOUT_2D
-    params_attrs = {f"param_{k}" for k in SimParams().to_dict()}
+    params_attrs = {f"param_{k}" for k in SimParams().stored_dict()}  # the keys of SimParams before 3D
     assert attrs == {"lx", "ly", "params", "producer", "schema_version", "solver", "status", *params_attrs}
     assert steps == 243
     assert strain == pytest.approx(0.11015268131251751, rel=1e-9)
@@ -272,23 +272,27 @@ def test_flow_curves_never_pool_2d_and_3d_runs(trajectory_3d, tmp_path):
     assert any(line.startswith("| 50 | 0.7 |") for line in table)
 
 
-def test_the_rate_control_keys_are_3d_settings_and_dim_is_2_or_3():
+def test_dim_is_2_or_3_and_rate_control_holds_in_both():
     assert type(params_from_mapping({"phi": 0.7})) is SimParams
     assert type(params_from_mapping({"dim": 2, "phi": 0.7})) is SimParams
     assert params_from_mapping({"dim": 3, "control": "rate", "shear_rate": 0.2}).shear_rate == 0.2
-    with pytest.raises(ParameterError, match="sim.control is a 3D setting"):
-        params_from_mapping({"control": "rate"})
+    assert params_from_mapping({"control": "rate", "shear_rate": 0.2}) == SimParams(
+        control="rate", shear_rate=0.2
+    )
     with pytest.raises(ParameterError, match=r"sim.dim=4 is invalid: allowed one of \(2, 3\)"):
         params_from_mapping({"dim": 4})
 
 
-def test_run_names_tag_3d_runs_and_their_imposed_rate_only():
+def test_run_names_tag_3d_runs_and_imposed_rates_only():
     from rheograph.naming import run_name
 
     assert run_name(SimParams()) == "N400_phi0.76_s10_seed1_d0.001_euler"
     assert run_name(SimParams3D(n_particles=500, phi=0.5)) == "N500_phi0.5_s10_seed1_d0.001_euler_3d"
     rate = SimParams3D(n_particles=500, phi=0.5, control="rate", shear_rate=0.1)
     assert run_name(rate) == "N500_phi0.5_s10_rate0.1_seed1_d0.001_euler_3d"
+    assert (
+        run_name(SimParams(control="rate", shear_rate=0.1)) == "N400_phi0.76_s10_rate0.1_seed1_d0.001_euler"
+    )
 
 
 def test_the_memory_estimate_of_a_3d_run_is_its_own(monkeypatch):

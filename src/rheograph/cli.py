@@ -58,6 +58,7 @@ def checked_simulate_config(cfg: DictConfig):
     from rheograph.sim.solver import resolve_solver_name
 
     params = params_from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
+    params.particle_radii()  # a radii file (sim.radii=file) is read and checked here, before the run
     resolve_solver_name(cfg.solver)
     check_simulation_memory(params.n_particles, params.DIM)
     return params

@@ -4,6 +4,8 @@ for it."""
 
 from __future__ import annotations
 
+from pathlib import PurePath
+
 import numpy as np
 
 
@@ -26,17 +28,26 @@ def sim_id(
     dim=2,
     control="stress",
     shear_rate=None,
+    radii="bidisperse",
+    polydispersity=0.0,
+    radii_file="",
 ) -> str:
     """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended
     with LF_DEM's lagged step control); a 3D run's ends in ``_3d`` and, under rate control, names its
-    imposed rate after the stress that scales its springs: N500_phi0.5_s10_rate0.1_seed1_d0.002_implicit_3d.
+    imposed rate after the stress that scales its springs: N500_phi0.5_s10_rate0.1_seed1_d0.002_implicit_3d
+    (2D as well); radii other than bidisperse follow: ``_poly0.05`` (``radii=polydisperse``) or
+    ``_radii-<file stem>`` (``radii=file``), e.g. N400_phi0.76_s10_poly0.05_seed1_d0.002_implicit.
     """
 
     def text(v):  # a value that is not a number still names a directory: SimParams refuses it afterwards
         return f"{v:g}" if isinstance(v, int | float) else str(v)
 
     phi, stress, disp_max = (text(v) for v in (phi, stress, disp_max))
-    rate = f"_rate{text(shear_rate)}" if dim == 3 and control == "rate" else ""
+    rate = f"_rate{text(shear_rate)}" if control == "rate" else ""
+    if radii == "polydisperse":
+        rate += f"_poly{text(polydispersity)}"
+    elif radii == "file":
+        rate += f"_radii-{PurePath(str(radii_file)).stem}"
     name = f"N{n_particles}_phi{phi}_s{stress}{rate}_seed{seed}_d{disp_max}_{integrator}"
     name += "_lagged" if lagged_step_control else ""
     return name + "_3d" if dim == 3 else name
@@ -53,6 +64,9 @@ def run_name(params) -> str:
         params.integrator,
         params.lagged_step_control,
         params.DIM,
-        getattr(params, "control", "stress"),
-        getattr(params, "shear_rate", None),
+        params.control,
+        params.shear_rate,
+        params.radii,
+        params.polydispersity,
+        params.radii_file,
     )

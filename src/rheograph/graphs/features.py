@@ -327,7 +327,7 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
     at 0.92 after one pass, 0.944 after two, 0.946 after three; with the recorded springs, 0.978 (a
     one-off measurement; the reproducible effect is bench/history_information.py).
     """
-    sim_params = SimParams.from_mapping({**params, "integrator": "implicit"})
+    sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
     snapshot = SimState(
         positions=np.array(positions, dtype=np.float64),
         radii=np.asarray(radii, dtype=np.float64),
@@ -395,7 +395,7 @@ def relax_positions(
     repaired against what is forgotten.  The repair takes more strain in looser packings: after noise of
     0.01 a the largest overlap is back at the simulator's own after 0.01 strain at phi = 0.76 (N = 400)
     and after 0.05 at phi = 0.72 (tests/test_imaging.py)."""
-    sim_params = SimParams.from_mapping({**params, "integrator": "implicit"})
+    sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
     sim = Simulation(
         sim_params,
         SimState(

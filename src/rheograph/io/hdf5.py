@@ -224,8 +224,10 @@ class TrajectoryFile:
             h5.attrs["schema_version"] = SCHEMA_VERSION
             h5.attrs["producer"] = PRODUCER
             h5.attrs["status"] = "running"
-            h5.attrs["params"] = json.dumps(self.params.to_dict())
-            for key, value in self.params.to_dict().items():
+            # the default path's parameters as before rate control and radii existed (``stored_dict``)
+            stored = self.params.stored_dict()
+            h5.attrs["params"] = json.dumps(stored)
+            for key, value in stored.items():
                 h5.attrs[f"param_{key}"] = value
             h5.attrs["lx"] = state.lx
             h5.attrs["ly"] = state.ly
@@ -381,8 +383,10 @@ class TrajectoryFile:
             differ = params_that_differ(stored, self.params)
             if differ:
                 requested = {"dim": self.params.DIM, **mine}
+                defaults = type(self.params).defaults()  # of a parameter the file was written without
                 detail = ", ".join(
-                    f"{k}: file {stored.get(k, 2 if k == 'dim' else None)!r} vs requested {requested[k]!r}"
+                    f"{k}: file {stored.get(k, 2 if k == 'dim' else defaults.get(k))!r} vs requested "
+                    f"{requested[k]!r}"
                     for k in differ
                 )
                 raise TrajectoryFileError(f"{self.path} belongs to another state point ({detail})")
@@ -402,10 +406,10 @@ class TrajectoryFile:
             for name in ("contact_pairs", "contact_state", "contact_stretch"):
                 sn[name].resize(n_contacts, axis=0)
             h5.attrs["status"] = "running"
-            h5.attrs["params"] = json.dumps(
-                mine
-            )  # resumable parameters (strain, wall limits) may have changed
-            for key, value in mine.items():
+            # resumable parameters (strain, wall limits) may have changed; stored as a new file stores them
+            stored = self.params.stored_dict()
+            h5.attrs["params"] = json.dumps(stored)
+            for key, value in stored.items():
                 h5.attrs[f"param_{key}"] = value
             self.h5 = h5
             return state, counters

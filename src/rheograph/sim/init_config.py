@@ -5,6 +5,7 @@ from numba import njit
 
 from rheograph.errors import StatePointError
 from rheograph.sim.geometry import minimum_image, neighbour_pairs, wrap_positions
+from rheograph.sim.radii import bidisperse_radii
 
 
 @njit(cache=True)
@@ -32,10 +33,6 @@ def _overlap_step(pos, radii, pair_i, pair_j, lx, ly, step):
     return max_overlap
 
 
-def bidisperse_radii(n_small: int, n_large: int, size_ratio: float) -> np.ndarray:
-    return np.concatenate([np.ones(n_small), np.full(n_large, size_ratio)])
-
-
 def random_configuration(
     n_small: int,
     n_large: int,
@@ -45,6 +42,7 @@ def random_configuration(
     tolerance: float = 1e-4,
     min_gap: float = 0.01,
     max_iterations: int = 200_000,
+    radii: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Uniform random centres in the square box, overlaps removed by overdamped soft repulsion.
 
@@ -56,7 +54,8 @@ def random_configuration(
     below ``tolerance`` (the area fraction is above random close packing).
     """
     rng = np.random.default_rng(seed)
-    true_radii = bidisperse_radii(n_small, n_large, size_ratio)
+    # ``radii`` (N,): any radii (``rheograph.sim.radii``); None: bidisperse (n_small, n_large, size_ratio)
+    true_radii = bidisperse_radii(n_small, n_large, size_ratio) if radii is None else np.asarray(radii)
     # inflate, but never beyond an area fraction of 0.80, which soft spheres still relax quickly
     phi = np.pi * np.sum(true_radii**2) / box_length**2
     inflate = min(1.0 + min_gap, max(1.0, np.sqrt(0.80 / phi)))
@@ -97,5 +96,6 @@ def initial_configuration(params) -> tuple[np.ndarray, np.ndarray, float]:
         params.seed,
         params.relax_tolerance,
         params.initial_min_gap,
+        radii=params.particle_radii(),
     )
     return pos, radii, box

@@ -5,7 +5,7 @@ from numba import njit
 
 from rheograph.errors import StatePointError
 from rheograph.sim.geometry3d import minimum_image, neighbour_pairs, wrap_positions
-from rheograph.sim.init_config import bidisperse_radii
+from rheograph.sim.radii import bidisperse_radii
 
 # inflated radii are capped at this volume fraction: soft spheres still relax quickly there
 INFLATED_PHI_MAX = 0.60
@@ -44,6 +44,7 @@ def random_configuration(
     tolerance: float = 1e-4,
     min_gap: float = 0.01,
     max_iterations: int = 200_000,
+    radii: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Uniform random centres in the cube, overlaps removed by overdamped soft repulsion with radii
     inflated by (1 + min_gap) (less if that would exceed a volume fraction of ``INFLATED_PHI_MAX``), so
@@ -53,7 +54,8 @@ def random_configuration(
     below ``tolerance`` (too close to random close packing).
     """
     rng = np.random.default_rng(seed)
-    true_radii = bidisperse_radii(n_small, n_large, size_ratio)
+    # ``radii`` (N,): any radii (``rheograph.sim.radii``); None: bidisperse (n_small, n_large, size_ratio)
+    true_radii = bidisperse_radii(n_small, n_large, size_ratio) if radii is None else np.asarray(radii)
     phi = 4.0 * np.pi / 3.0 * np.sum(true_radii**3) / box_length**3
     inflate = min(1.0 + min_gap, max(1.0, (INFLATED_PHI_MAX / phi) ** (1.0 / 3.0)))
     radii = true_radii * inflate
@@ -85,6 +87,7 @@ def initial_configuration(params) -> tuple[np.ndarray, np.ndarray, float]:
     n_small, n_large = params.species_counts()
     box = params.box_length()
     pos, radii = random_configuration(
-        n_small, n_large, params.size_ratio, box, params.seed, params.relax_tolerance, params.initial_min_gap
-    )
+        n_small, n_large, params.size_ratio, box, params.seed, params.relax_tolerance, params.initial_min_gap,
+        radii=params.particle_radii(),
+    )  # fmt: skip
     return pos, radii, box

@@ -1,5 +1,6 @@
-"""Time integration of the stress-controlled LF-DEM: one step = geometry -> CLM -> R_FU -> two solves ->
-shear rate from the stress target -> adaptive dt -> move.  No I/O here (see ``rheograph.runner``).
+"""Time integration of the LF-DEM: one step = geometry -> CLM -> R_FU -> two solves -> shear rate from the
+stress target (stress control, the default) or the imposed rate (``control="rate"``) -> adaptive dt ->
+move.  No I/O here (see ``rheograph.runner``).
 
 Integrators:
 - ``euler``: explicit Euler as in LF_DEM; contact springs enter with their value at the start of the step.
@@ -282,7 +283,7 @@ DT_GROWTH = 1.2  # largest growth of dt between steps of the implicit integrator
 
 
 class Simulation:
-    """A stress-controlled LF-DEM run of one state point.
+    """A 2D LF-DEM run of one state point, under stress (default) or rate control (``params.control``).
 
     >>> sim = Simulation(SimParams(n_particles=100, phi=0.7, stress=1.0))
     >>> result = sim.step(record=True)
@@ -410,7 +411,10 @@ class Simulation:
         solvent_unit = np.array([0.0, 1.0, 0.0])  # 2 eta0 E at unit rate, in sigma0
         s0_xy = f * (lub0[1] + dash0[1] + spring[1])
         s1_xy = f * (lub1[1] + dash1[1]) + 1.0
-        shear_rate = (p.stress - s0_xy) / s1_xy
+        if p.control == "stress":
+            shear_rate = (p.stress - s0_xy) / s1_xy
+        else:  # rate control: the rate is imposed, the stress S_0 + rate * S_1 is measured
+            shear_rate = p.shear_rate
         vel = vel_const + shear_rate * vel_rate
         t5 = clock()
         timings["stress"] += t5 - t4

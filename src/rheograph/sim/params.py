@@ -13,6 +13,10 @@ from dataclasses import dataclass
 from rheograph.errors import InputError
 
 INTEGRATORS = ("euler", "implicit")
+CONTROLS = ("stress", "rate")
+RADII = ("bidisperse", "polydisperse", "file")
+POLYDISPERSITY_MAX = 0.25  # relative spread of sim.radii=polydisperse; radii truncated at 2 spreads
+LARGEST_RADIUS_RATIO = 10.0  # largest / smallest radius, as for size_ratio
 LAGGED_SUFFIX = "-lagged"  # scheme label of LF_DEM's lagged step control
 
 
@@ -70,6 +74,17 @@ class SimParams:
     checkpoint_wall_seconds: float = 60.0  # wall seconds between checkpoints
     relax_tolerance: float = 1e-4  # max overlap [a] accepted for the initial configuration
     initial_min_gap: float = 0.01  # radii inflated by (1 + this) while relaxing, so gaps start open
+    # added after files were written without them: stored only off their defaults (``stored_dict``)
+    control: str = "stress"  # "stress" (imposed sigma_xy = stress) or "rate" (imposed shear_rate)
+    shear_rate: float = 1.0  # imposed shear rate under rate control [gamma0_dot]; unused under stress
+    radii: str = "bidisperse"  # "bidisperse" (1 : size_ratio), "polydisperse" or "file" (radii_file)
+    polydispersity: float = 0.0  # relative Gaussian spread of each species' radii (radii=polydisperse)
+    radii_file: str = ""  # text or .npy file of the N radii [a] (radii=file)
+
+    # the parameters above in the order a file stores them, and those stored only off their defaults:
+    # a 2D stress-controlled bidisperse run stores exactly what it stored before they existed
+    STORED_TAIL = ()
+    LATER_PARAMS = ("control", "shear_rate", "radii", "polydispersity", "radii_file")
 
     def __post_init__(self) -> None:
         self.validate()
@@ -84,17 +99,57 @@ class SimParams:
         return self.kt_ratio * self.kn
 
     def species_counts(self) -> tuple[int, int]:
-        """(n_small, n_large) with equal area of each species: n_s = size_ratio^2 n_l."""
-        n_large = round(self.n_particles / (1.0 + self.size_ratio**2))
+        """(n_small, n_large) with equal area of each species: n_s = size_ratio^2 n_l (the species of
+        ``radii="bidisperse"`` and ``"polydisperse"``)."""
+        n_large = round(self.n_particles / (1.0 + self.size_ratio**self.DIM))
         return self.n_particles - n_large, n_large
 
+    def particle_radii(self):
+        """The N radii [a] of this state point (``rheograph.sim.radii``): bidisperse, drawn, or read."""
+        from rheograph.sim.radii import particle_radii
+
+        return particle_radii(self)
+
     def box_length(self) -> float:
-        n_small, n_large = self.species_counts()
-        area = math.pi * (n_small + n_large * self.size_ratio**2)
-        return math.sqrt(area / self.phi)
+        """Edge of the square (2D) or cubic (3D) box [a] that holds the radii at fraction ``phi``."""
+        if self.radii == "bidisperse":  # the closed form: the box of every run written before radii
+            n_small, n_large = self.species_counts()
+            if self.DIM == 2:
+                return math.sqrt(math.pi * (n_small + n_large * self.size_ratio**2) / self.phi)
+            volume = 4.0 * math.pi / 3.0 * (n_small + n_large * self.size_ratio**3)
+            return (volume / self.phi) ** (1.0 / 3.0)
+        from rheograph.sim.radii import box_length
+
+        return box_length(self.particle_radii(), self.phi, self.DIM)
+
+    def check_box(self, largest_radius: float, box_length: float) -> None:
+        """Raises ParameterError when the box is too small for the interaction cut-off of two particles
+        of the largest radius: the minimum image must be unique for the longest interaction."""
+        cutoff = 2.0 * largest_radius * (1.0 + 0.5 * self.lub_max_gap) + self.neighbour_skin
+        if box_length < 2.0 * cutoff:
+            n_min = math.ceil(self.n_particles * (2.0 * cutoff / box_length) ** self.DIM)
+            raise ParameterError(
+                f"sim.n_particles={self.n_particles} is too small for the interaction cut-off at "
+                f"phi={self.phi}: the box (L={box_length:.2f}) must be at least twice the cut-off "
+                f"({cutoff:.2f}); use n_particles >= {n_min}"
+            )
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def stored_dict(self) -> dict:
+        """The parameters as a trajectory file stores them: ``to_dict`` without the ``LATER_PARAMS`` at
+        their defaults (both control keys under rate control), so that files of the default path are
+        written as before those parameters existed; ``params_that_differ`` reads a missing one as its
+        default."""
+        values = self.to_dict()
+        tail = {k: values.pop(k) for k in self.STORED_TAIL}
+        later = {k: values.pop(k) for k in self.LATER_PARAMS}
+        defaults = self.defaults()
+        keep = {k for k, v in later.items() if v != defaults[k]}
+        if later.get("control") == "rate":
+            keep |= {"control", "shear_rate"}
+        return {**values, **tail, **{k: v for k, v in later.items() if k in keep}}
 
     @classmethod
     def defaults(cls) -> dict:
@@ -164,12 +219,23 @@ class SimParams:
         check("initial_min_gap", 0.0 <= self.initial_min_gap <= 0.1, "0 <= initial_min_gap <= 0.1")
         check("seed", isinstance(self.seed, int) and self.seed >= 0, "integer seed >= 0")
         check("n_particles", isinstance(self.n_particles, int) and self.n_particles >= 2, "integer >= 2")
-        # the minimum image must be unique for the longest interaction (two large particles + gap + skin)
-        cutoff = 2.0 * self.size_ratio * (1.0 + 0.5 * self.lub_max_gap) + self.neighbour_skin
-        if self.box_length() < 2.0 * cutoff:
-            n_min = math.ceil(self.n_particles * (2.0 * cutoff / self.box_length()) ** self.DIM)
-            raise ParameterError(
-                f"sim.n_particles={self.n_particles} is too small for the interaction cut-off at "
-                f"phi={self.phi}: the box (L={self.box_length():.2f}) must be at least twice the cut-off "
-                f"({cutoff:.2f}); use n_particles >= {n_min}"
-            )
+        check("control", self.control in CONTROLS, f"one of {CONTROLS}")
+        check("shear_rate", self.shear_rate > 0.0, "shear_rate > 0 (gamma0_dot)")
+        check("radii", self.radii in RADII, f"one of {RADII}")
+        poly = self.radii == "polydisperse"
+        check(
+            "polydispersity",
+            0.0 < self.polydispersity <= POLYDISPERSITY_MAX if poly else self.polydispersity == 0.0,
+            f"0 < polydispersity <= {POLYDISPERSITY_MAX} with sim.radii=polydisperse, else 0",
+        )
+        check(
+            "radii_file",
+            bool(self.radii_file) if self.radii == "file" else self.radii_file == "",
+            "a file of N radii with sim.radii=file, else empty",
+        )
+        # a radii file is read where the radii are needed (a new run), not wherever its parameters are: a
+        # file's stored params stay readable without it; rheograph.sim.radii checks its box then
+        if self.radii == "bidisperse":
+            self.check_box(self.size_ratio, self.box_length())
+        elif self.radii == "polydisperse":
+            self.check_box(float(self.particle_radii().max()), self.box_length())

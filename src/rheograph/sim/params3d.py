@@ -7,12 +7,12 @@ Units as in 2D: length a (small radius), force F_CL, stress sigma0 = F_CL/(6 pi 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from rheograph.sim.params import ParameterError, SimParams
+from rheograph.sim.params import CONTROLS, ParameterError, SimParams
 
-CONTROLS = ("stress", "rate")
+__all__ = ["CONTROLS", "DIMENSIONS", "SimParams3D", "params_from_mapping"]
+
 DIMENSIONS = (2, 3)
 
 
@@ -35,36 +35,21 @@ class SimParams3D(SimParams):
 
     dim: int = 3  # space dimension: recorded with the parameters, so that a file says what it holds
     phi: float = 0.55  # volume fraction sum(4 pi a_i^3 / 3) / (Lx Ly Lz)
-    control: str = "stress"  # "stress" (imposed sigma_xy) or "rate" (imposed shear rate)
-    shear_rate: float = 1.0  # imposed shear rate under rate control [gamma0_dot]; unused under stress
 
-    def species_counts(self) -> tuple[int, int]:
-        """(n_small, n_large) with equal volume of each species: n_s = size_ratio^3 n_l."""
-        n_large = round(self.n_particles / (1.0 + self.size_ratio**3))
-        return self.n_particles - n_large, n_large
-
-    def box_length(self) -> float:
-        """Edge of the cubic box [a]."""
-        n_small, n_large = self.species_counts()
-        volume = 4.0 * math.pi / 3.0 * (n_small + n_large * self.size_ratio**3)
-        return (volume / self.phi) ** (1.0 / 3.0)
+    # a 3D file stores dim and both control keys (3D had them from its start) after the 2D parameters
+    STORED_TAIL = ("dim", "control", "shear_rate")
+    LATER_PARAMS = ("radii", "polydispersity", "radii_file")
 
     def validate(self) -> None:
         super().validate()
         if self.dim != 3:
             raise ParameterError(f"sim.dim={self.dim!r} is invalid for SimParams3D: allowed 3")
-        if self.control not in CONTROLS:
-            raise ParameterError(f"sim.control={self.control!r} is invalid: allowed one of {CONTROLS}")
-        if not (math.isfinite(self.shear_rate) and self.shear_rate > 0.0):
-            raise ParameterError(
-                f"sim.shear_rate={self.shear_rate!r} is invalid: allowed shear_rate > 0 (gamma0_dot)"
-            )
 
 
 def params_from_mapping(mapping) -> SimParams:
     """The parameters of a ``sim`` mapping (a Hydra ``sim`` node, a file's stored params): ``SimParams3D``
     where ``dim`` is 3, else ``SimParams`` (no ``dim``, or 2: files and configs written before 3D existed
-    carry none).  Raises ``ParameterError`` for another ``dim`` and for the rate-control keys in 2D."""
+    carry none).  Raises ``ParameterError`` for another ``dim``."""
     mapping = dict(mapping)
     dim = mapping.get("dim", 2)
     if dim not in DIMENSIONS or isinstance(dim, bool):
@@ -72,10 +57,4 @@ def params_from_mapping(mapping) -> SimParams:
     if dim == 3:
         return SimParams3D.from_mapping(mapping)
     mapping.pop("dim", None)
-    rate_keys = sorted({"control", "shear_rate"} & set(mapping))
-    if rate_keys:
-        # the 2D simulator imposes the stress only: refused rather than ignored
-        raise ParameterError(
-            f"sim.{rate_keys[0]} is a 3D setting (sim=3d): 2D runs are stress-controlled (sim.stress)"
-        )
     return SimParams.from_mapping(mapping)
