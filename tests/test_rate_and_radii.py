@@ -211,3 +211,20 @@ def test_simulate_py_refuses_a_bad_radii_file_in_one_line(tmp_path):
     assert done.returncode != 0 and len(lines) == 1 and "Traceback" not in done.stderr
     assert lines[0].startswith("simulate.py: error: sim.radii_file=r.txt: 2 radii, but sim.n_particles=64")
     assert not (tmp_path / "out").exists()
+
+
+def test_flow_curves_keep_runs_of_other_radii_apart(tmp_path):
+    """A polydisperse run at the state point of a bidisperse one is a different suspension: its own row,
+    labelled by its radii, never pooled as another seed."""
+    from rheograph.flowcurve import collect, markdown_table
+
+    (tmp_path / "runs").mkdir()
+    for name, extra in (("bi", {}), ("poly", {"radii": "polydisperse", "polydispersity": 0.1})):
+        params = SimParams(**{**TINY, "strain": 0.02, **extra})
+        run_state_point(params, tmp_path / "runs" / f"{name}.h5", progress=False)
+    points = collect([tmp_path / "runs"])
+    assert sorted(p["radii"] for p in points) == ["", "polydisperse 0.1"]
+    assert all(p["n_runs"] == 1 for p in points)
+    rows = markdown_table(points).splitlines()
+    assert any(row.startswith("| 64 (polydisperse 0.1) |") for row in rows)
+    assert any(row.startswith("| 64 |") for row in rows)

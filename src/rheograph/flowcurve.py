@@ -73,7 +73,7 @@ def collect(directories) -> list[dict]:
                 rate = p["shear_rate"] if p.get("control", "stress") == "rate" else 0.0
                 key = (
                     p["n_particles"], p["phi"], p["stress"], p["mu"], p["disp_max"], scheme,
-                    p.get("dim", 2), rate,
+                    p.get("dim", 2), rate, radii_label(p),
                 )  # fmt: skip
                 seed = p["seed"]
             except DAMAGED_FILE_ERRORS as exc:  # the file, its parameters or its time series damaged
@@ -85,7 +85,7 @@ def collect(directories) -> list[dict]:
             if same_start is None or info["strain"] > same_start["strain"]:
                 groups[key][seed] = info
     points = []
-    for (n, phi, stress, mu, disp, integrator, dim, rate), by_seed in sorted(groups.items()):
+    for (n, phi, stress, mu, disp, integrator, dim, rate, radii), by_seed in sorted(groups.items()):
         infos = list(by_seed.values())
         point = dict(
             n_particles=n,
@@ -96,6 +96,7 @@ def collect(directories) -> list[dict]:
             integrator=integrator,
             dim=dim,
             imposed_rate=rate,  # 0: stress control
+            radii=radii,  # "" for the bidisperse default
             statuses=sorted({i["status"] for i in infos}),
             strain=float(np.mean([i["strain"] for i in infos])),
         )
@@ -172,12 +173,26 @@ def reference_points(directory, strain_min: float = 1.0) -> list[dict]:
     return out
 
 
+def radii_label(params: dict) -> str:
+    """How a run's radii were made, where not the bidisperse default (""): ``polydisperse 0.05`` or
+    ``radii of <file name>``; runs of other radii are never pooled."""
+    radii = params.get("radii", "bidisperse")
+    if radii == "polydisperse":
+        return f"polydisperse {params['polydispersity']:g}"
+    if radii == "file":
+        return f"radii of {Path(str(params['radii_file'])).name}"
+    return ""
+
+
 def system_label(point: dict) -> str:
     """N of a flow-curve point, with its dimension and imposed rate where it is not a 2D stress-controlled
-    run: ``400``, ``500 (3D)``, ``500 (3D, rate 0.1)``."""
+    run, or the radii where not bidisperse: ``400``, ``500 (3D)``, ``500 (3D, rate 0.1)``,
+    ``400 (polydisperse 0.05)``."""
     notes = ["3D"] if point.get("dim", 2) == 3 else []
     if point.get("imposed_rate", 0.0):
         notes.append(f"rate {point['imposed_rate']:g}")
+    if point.get("radii"):
+        notes.append(point["radii"])
     return f"{point['n_particles']}" + (f" ({', '.join(notes)})" if notes else "")
 
 
@@ -237,13 +252,15 @@ def plot(points, reference, out_png: Path) -> None:
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.9))
     series = defaultdict(list)
     for p in points:
-        series[(p["phi"], p["disp_max"], p["integrator"], p["dim"], p["imposed_rate"])].append(p)
-    for (phi, disp, integrator, dim, rate), pts in sorted(series.items()):
+        key = (p["phi"], p["disp_max"], p["integrator"], p["dim"], p["imposed_rate"], p.get("radii", ""))
+        series[key].append(p)
+    for (phi, disp, integrator, dim, rate, radii), pts in sorted(series.items()):
         pts = sorted(pts, key=lambda q: q["stress"])
         s = np.array([q["stress"] for q in pts])
         label = f"φ={phi:g} (disp_max {disp:g}, {integrator})"
         label += ", 3D" if dim == 3 else ""
         label += f", rate {rate:g}" if rate else ""
+        label += f", {radii}" if radii else ""
         if all(q["jammed"] for q in pts):
             label += ", shear-jammed"
         for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
