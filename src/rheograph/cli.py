@@ -57,10 +57,12 @@ def checked_simulate_config(cfg: DictConfig):
     from rheograph.sim.params3d import params_from_mapping
     from rheograph.sim.solver import resolve_solver_name
 
+    n_particles, dim = cfg.sim.get("n_particles"), cfg.sim.get("dim", 2)
+    if isinstance(n_particles, int) and dim in (2, 3):  # else the parameter check names what is wrong
+        check_simulation_memory(n_particles, dim)  # first: checking the parameters allocates the radii
     params = params_from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
     params.particle_radii()  # a radii file (sim.radii=file) is read and checked here, before the run
     resolve_solver_name(cfg.solver)
-    check_simulation_memory(params.n_particles, params.DIM)
     return params
 
 

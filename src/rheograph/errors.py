@@ -25,6 +25,10 @@ class InputError(ValueError):
     """Bad input from the user (configuration, command line or file)."""
 
 
+class ParameterError(InputError):
+    """A simulation parameter is outside its allowed range."""
+
+
 class StatePointError(InputError):
     """A state point that cannot be run as asked, for a reason of its own physics (no overlap-free
     initial configuration at its area fraction): alone it ends the program like any bad input; in a

@@ -10,13 +10,13 @@ import math
 import numbers
 from dataclasses import dataclass
 
-from rheograph.errors import InputError
+from rheograph.errors import ParameterError
+from rheograph.sim.radii import box_length, particle_radii
 
 INTEGRATORS = ("euler", "implicit")
 CONTROLS = ("stress", "rate")
 RADII = ("bidisperse", "polydisperse", "file")
 POLYDISPERSITY_MAX = 0.25  # relative spread of sim.radii=polydisperse; radii truncated at 2 spreads
-LARGEST_RADIUS_RATIO = 10.0  # largest / smallest radius, as for size_ratio
 LAGGED_SUFFIX = "-lagged"  # scheme label of LF_DEM's lagged step control
 
 
@@ -29,10 +29,6 @@ def scheme_settings(name: str) -> dict:
     """The SimParams fields of a scheme label (inverse of ``scheme_name``)."""
     lagged = name.endswith(LAGGED_SUFFIX)
     return {"integrator": name.removesuffix(LAGGED_SUFFIX), "lagged_step_control": lagged}
-
-
-class ParameterError(InputError):
-    """A simulation parameter is outside its allowed range."""
 
 
 @dataclass(frozen=True)
@@ -106,8 +102,6 @@ class SimParams:
 
     def particle_radii(self):
         """The N radii [a] of this state point (``rheograph.sim.radii``): bidisperse, drawn, or read."""
-        from rheograph.sim.radii import particle_radii
-
         return particle_radii(self)
 
     def box_length(self) -> float:
@@ -118,8 +112,6 @@ class SimParams:
                 return math.sqrt(math.pi * (n_small + n_large * self.size_ratio**2) / self.phi)
             volume = 4.0 * math.pi / 3.0 * (n_small + n_large * self.size_ratio**3)
             return (volume / self.phi) ** (1.0 / 3.0)
-        from rheograph.sim.radii import box_length
-
         return box_length(self.particle_radii(), self.phi, self.DIM)
 
     def check_box(self, largest_radius: float, box_length: float) -> None:

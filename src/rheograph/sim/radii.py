@@ -22,7 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.sim.params import LARGEST_RADIUS_RATIO, ParameterError
+from rheograph.errors import ParameterError
+
+LARGEST_RADIUS_RATIO = 10.0  # largest / smallest radius, as for size_ratio
 
 TRUNCATION = 2.0  # drawn radii lie within mean * (1 +- TRUNCATION * polydispersity)
 RADII_STREAM = 1  # the second entry of the seed sequence of the radii draw
