@@ -9,7 +9,7 @@ zeros for pairs that do not interact this step, so the symbolic factorisation li
 import numpy as np
 from numba import njit
 
-from rheograph.sim.lubrication3d import contact_block, pair_block, strain_force
+from rheograph.sim.lubrication3d import contact_block, one_body_resistance, pair_block, strain_force
 
 # the imposed rate of strain at unit shear rate (u = y e_x): E_xy = E_yx = 1/2
 UNIT_STRAIN_RATE = np.array([[0.0, 0.5, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])
@@ -59,7 +59,7 @@ def assemble_resistance(
         a = radii[j]
         for q in range(6):
             base = indptr[6 * j + q] + diag_slot[j]
-            data[base + q] += a if q < 3 else (4.0 / 3.0) * a * a * a
+            data[base + q] += one_body_resistance(a, q)
     for p in range(pair_i.shape[0]):
         if not active[p]:
             continue

@@ -123,9 +123,20 @@ def contact_block(coeff, n, ai, aj, k_normal, k_tangential, R):
     return R
 
 
-def one_body_drag(radii: np.ndarray) -> np.ndarray:
-    """Stokes drag per degree of freedom (6N,) in 6 pi eta0: a_i on each translation (6 pi eta0 a) and
-    4 a_i^3 / 3 on each rotation (8 pi eta0 a^3), ordered [U_i (3), w_i (3)] per particle."""
-    a = np.asarray(radii, dtype=float)
-    rot = 4.0 * a**3 / 3.0
-    return np.stack([a, a, a, rot, rot, rot], axis=1).ravel()
+@njit(cache=True)
+def one_body_resistance(a, dof):
+    """Stokes drag of a sphere of radius ``a`` on its degree of freedom ``dof`` (0-2 translation, 3-5
+    rotation), in 6 pi eta0: a on translation (6 pi eta0 a), 4 a^3 / 3 on rotation (8 pi eta0 a^3)."""
+    return a if dof < 3 else (4.0 / 3.0) * a * a * a
+
+
+@njit(cache=True)
+def one_body_drag(radii):
+    """Stokes drag per degree of freedom (6N,) of spheres of ``radii`` (N,), in 6 pi eta0, ordered
+    [U_i (3), w_i (3)] per particle."""
+    n = radii.shape[0]
+    drag = np.empty(6 * n)
+    for i in range(n):
+        for dof in range(6):
+            drag[6 * i + dof] = one_body_resistance(radii[i], dof)
+    return drag
