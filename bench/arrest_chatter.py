@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import glob
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -29,12 +28,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
+from publishing import publish
 
 from rheograph.io.hdf5 import read_checkpoint, read_run_info  # noqa: E402
 from rheograph.sim.integrator import Simulation, particle_pressure  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

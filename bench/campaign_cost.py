@@ -15,19 +15,16 @@ from __future__ import annotations
 
 import argparse
 import glob
-import sys
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from publishing import publish
 
 from rheograph.dataset_card import run_cpu_seconds
 from rheograph.io.hdf5 import read_run_info
 from rheograph.io.index import read_index
 from rheograph.sim.params import scheme_name
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS_PLANNED = {400: 3, 2000: 2}  # the paper-scale grid

@@ -22,22 +22,18 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
-from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")
 
 import numpy as np  # noqa: E402
+from publishing import publish
 from sksparse import cholmod  # noqa: E402
 
 from rheograph.sim.integrator import Simulation  # noqa: E402
 from rheograph.sim.params import SimParams  # noqa: E402
 from rheograph.sim.solver import CholmodSolver  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
 
 
 class CapturingSolver(CholmodSolver):

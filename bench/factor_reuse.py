@@ -26,14 +26,12 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")
 
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
+from publishing import publish
 from scipy.sparse.linalg import LinearOperator, cg  # noqa: E402
 
 from rheograph.sim.integrator import Simulation  # noqa: E402
 from rheograph.sim.params import SimParams  # noqa: E402
 from rheograph.sim.solver import CholmodSolver  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

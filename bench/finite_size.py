@@ -16,13 +16,10 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import defaultdict
-from pathlib import Path
 
 import numpy as np
+from publishing import command_line, publish
 from scipy.stats import binomtest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
 
 
 def fmt(value: float, se: float) -> str:

@@ -22,18 +22,15 @@ from __future__ import annotations
 import argparse
 import glob
 import json
-import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
+from publishing import publish
 
 from rheograph.graphs.features import snapshot_descriptors, snapshot_pairs, solve_viscosity
 from rheograph.learn.module import r2_score
 from rheograph.sim.geometry import pair_geometry
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = {"log η_r": "viscosity", "log Π": "pressure", "Z_μ": "z_mu"}

@@ -21,9 +21,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
+from publishing import command_line, publish
 
 
 def run_cost(path: Path) -> dict | None:

@@ -28,9 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
+from publishing import command_line, publish
 from zero_shot_n import lookup_mean  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -30,8 +30,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
-from simulate_speed import command_line  # noqa: E402
+from publishing import command_line  # noqa: E402
 
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
 MATCH_WITHIN = 0.5  # [a]: a tracked particle farther than this from every true one is spurious

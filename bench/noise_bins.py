@@ -21,9 +21,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
+from publishing import command_line, publish
 
 ROOT = Path(__file__).resolve().parents[1]
 # saved prediction arrays and the names the result tables give them

@@ -5,35 +5,37 @@ positions, gap-shell inputs (φ = 0.76) and the lookup of the training mean at (
 
     python bench/noise_figure.py
 
-It draws the tables that ``bench/snapshot_noise.py`` published in docs/benchmarks.md (sections
-``snapshot_noise_phi070``, ``snapshot_noise_imaging``, ``snapshot_noise_phi080``; their commands are
-printed there), so it costs no prediction: rerun those commands to refresh the numbers, then this.
-Writes docs/figures/imaging_noise.png (``--out``).
+It draws the numbers that ``bench/snapshot_noise.py`` records for each run it scores
+(docs/results/bench/snapshot_noise/<run>.json, each with the command that made it; the same numbers as
+its tables in docs/benchmarks.md), so it costs no prediction: rerun those commands to refresh them, then
+this.  Writes docs/figures/imaging_noise.png (``--out``).
 """
 
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 from pathlib import Path
 
 import numpy as np
+from publishing import read_result_record
+
+from rheograph.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
+RECORDS = ROOT / "docs" / "results" / "bench" / "snapshot_noise"  # bench/snapshot_noise.py's, per run
 TARGETS = (("R² log η_r", "log η_r"), ("R² log Π", "log Π"), ("R² Z_μ", "Z_μ"))
 RELAXED = "graph network on positions relaxed by Δγ = 0.01 (every 4th)"  # the exact model, relaxed input
-# (φ, published section, the exact model's run, the imaging model's run, further (run, row, label))
+# (φ, the exact model's run, the imaging model's run, further (run, row, label))
 PANELS = (
-    (0.70, "snapshot_noise_phi070", "N400_phi0.70", "N400_phi0.70_relaxed_measured", ()),
+    (0.70, "N400_phi0.70", "N400_phi0.70_relaxed_measured", ()),
     (
         0.76,
-        "snapshot_noise_imaging",
         "N400_phi0.76",
         "N400_phi0.76_relaxed_measured",
         (("N400_phi0.76_shells", "graph network", "gap shells, ε known"),),
     ),
-    (0.80, "snapshot_noise_phi080", "N400_phi0.80", "N400_phi0.80_relaxed", ()),
+    (0.80, "N400_phi0.80", "N400_phi0.80_relaxed", ()),
 )
 
 
@@ -60,34 +62,29 @@ STYLE = {
 }
 
 
-def section_tables(page: str, section: str) -> tuple[list[float], dict]:
-    """The noise levels of a published snapshot_noise section of the text ``page`` and its rows:
-    {(run, predictor, metric): [value per ε]}."""
-    start, end = f"<!-- {section}:start -->", f"<!-- {section}:end -->"
-    if start not in page or end not in page:
-        sys.exit(f"noise_figure: the page has no section {section}: run its bench/snapshot_noise.py command")
-    text = page[page.index(start) : page.index(end)]
-    rows, eps, run = {}, None, None
-    for line in text.splitlines():
-        heading = re.match(r"\*\*(\S+?)\*\*", line)
-        if heading:
-            run = heading.group(1)
-        elif line.startswith("| predictor |"):
-            found = [float(x) for x in re.findall(r"ε = ([0-9.e-]+)", line)]
-            if eps is not None and found != eps:
-                sys.exit(f"noise_figure: section {section} mixes noise levels {eps} and {found}")
-            eps = found
-        elif line.startswith("| ") and run is not None and not line.startswith("|---"):
-            cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            rows[(run, cells[0], cells[1])] = [float(c) for c in cells[2:]]
-    if eps is None:
-        sys.exit(f"noise_figure: section {section} holds no table of noise levels")
+def run_records(records: Path, runs) -> tuple[list[float], dict]:
+    """The noise levels shared by the recorded ``runs`` and their rows {(run, predictor, metric): [value
+    per ε]}, from ``records``/<run>.json."""
+    rows, eps = {}, None
+    for run in runs:
+        try:
+            record = read_result_record(run, records)
+        except InputError as exc:
+            sys.exit(f"noise_figure: {exc}")
+        if eps is not None and record["noise"] != eps:
+            sys.exit(f"noise_figure: {run} was scored at noise levels {record['noise']}, another at {eps}")
+        eps = record["noise"]
+        for predictor, metrics in record["predictors"].items():
+            for metric, values in metrics.items():
+                rows[(run, predictor, metric)] = values
     return eps, rows
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--page", default=str(ROOT / "docs" / "benchmarks.md"))
+    ap.add_argument(
+        "--records", default=str(RECORDS), help="folder of snapshot_noise.py's records (<run>.json)"
+    )
     ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "imaging_noise.png"))
     args = ap.parse_args(argv)
 
@@ -96,20 +93,18 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    if not Path(args.page).is_file():
-        sys.exit(f"noise_figure: --page {args.page}: no such file (the validation log, docs/benchmarks.md)")
-    page = Path(args.page).read_text()
     fig, axes = plt.subplots(len(PANELS), len(TARGETS), figsize=(12, 10), sharex=True, squeeze=False)
     floor = 5e-4  # half the last digit the tables print: an R² shown as 1.000 is drawn here
-    for row, (phi, section, exact, imaging, extra) in enumerate(PANELS):
-        eps, rows = section_tables(page, section)
+    for row, (phi, exact, imaging, extra) in enumerate(PANELS):
+        runs = dict.fromkeys(run for run, _, _ in curves(exact, imaging, extra))
+        eps, rows = run_records(Path(args.records), runs)
         # ε = 0 drawn a decade below the smallest ε > 0, on the log axis
         x = np.array([e if e > 0 else min(v for v in eps if v > 0) / 10 for e in eps])
         for col, (metric, title) in enumerate(TARGETS):
             ax = axes[row, col]
             for run, predictor, label in curves(exact, imaging, extra):
                 if (run, predictor, metric) not in rows:
-                    sys.exit(f"noise_figure: section {section} has no row '{predictor}' / {metric} of {run}")
+                    sys.exit(f"noise_figure: the record of {run} has no row '{predictor}' / {metric}")
                 unexplained = np.maximum(1.0 - np.asarray(rows[(run, predictor, metric)]), floor)
                 ax.plot(x, unexplained, label=label, **STYLE[label])
             ax.set_xscale("log")

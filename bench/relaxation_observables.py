@@ -27,9 +27,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
+from publishing import command_line, publish
 
 
 def relaxation_path(path: str, every: int, noises, max_strain: float, solve_at: float, seed: int) -> list:

@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
-import sys
 import time
 from pathlib import Path
 
@@ -22,6 +20,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
+from publishing import replace_section
 
 from rheograph.sim import SimParams, Simulation  # noqa: E402
 from rheograph.sim.params import scheme_settings  # noqa: E402
@@ -125,37 +124,7 @@ def main() -> None:
         + "`",
     ]
     if not args.no_write:
-        write_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
-
-
-def command_line(script: str, argv=None) -> str:
-    """``python bench/<script> ARGS`` as the user typed it (``argv``, or the process's), less
-    ``--no-write``: the command that reproduces a published section."""
-    args = argv if argv is not None else sys.argv[1:]
-    return f"python bench/{script} {shlex.join([a for a in args if a != '--no-write'])}".rstrip()
-
-
-def publish(section: str, text: str, write: bool, page: str = "benchmarks.md") -> None:
-    """Print a result section and (unless the script's --no-write) replace it in docs/<page>."""
-    print(text)
-    if write:
-        write_section(ROOT / "docs" / page, section, text)
-
-
-def write_section(path: Path, name: str, body: str, insert_before: str | None = None) -> None:
-    """Replace the text between <!-- name:start --> and <!-- name:end -->; the first time, insert the
-    block just before the line starting with ``insert_before`` (a heading), or append it."""
-    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    block = f"{start}\n{body}\n{end}"
-    if start in text:
-        text = text[: text.index(start)] + block + text[text.index(end) + len(end) :]
-    elif insert_before and f"\n{insert_before}" in text:
-        at = text.index(f"\n{insert_before}") + 1
-        text = text[:at] + block + "\n\n" + text[at:]
-    else:
-        text = text.rstrip() + "\n\n" + block + "\n"
-    path.write_text(text)
+        replace_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
 
 
 if __name__ == "__main__":

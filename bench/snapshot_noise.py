@@ -27,11 +27,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
+from publishing import command_line, publish, write_result_record
 
 ROOT = Path(__file__).resolve().parents[1]
+RECORDS = ROOT / "docs" / "results" / "bench" / "snapshot_noise"  # per run, read by bench/noise_figure.py
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
 
 
@@ -200,6 +199,7 @@ def main(argv=None) -> int:
         "share of η_r within ±15 %).",
         "",
     ]
+    records: dict = {}  # {run: {predictor: {metric: [value per ε]}}}
     for run in args.runs:
         run_dir = Path(run)
         pooled = {}
@@ -238,12 +238,18 @@ def main(argv=None) -> int:
                 )
             rows_of = (*METRICS, ("r2_log_mu_eff", "R² log μ_eff"), ("fluct_eta", "fluct. η_r"))
             for key, label in (*rows_of, ("within15_eta", "±15 % η_r")):
-                cells = " | ".join(f"{scores[eps][key]:.3f}" for eps in args.noise)
+                values = [round(float(scores[eps][key]), 3) for eps in args.noise]
+                records.setdefault(run_dir.name, {}).setdefault(name, {})[label] = values
+                cells = " | ".join(f"{value:.3f}" for value in values)
                 lines.append(f"| {name} | {label} | {cells} |")
         lines.append("")
     command = command_line("snapshot_noise.py", argv)
     lines.append(f"Command: `{command}`")
     publish(args.section, "\n".join(lines), not args.no_write)
+    if not args.no_write:  # each run's numbers, as its table prints them, for bench/noise_figure.py
+        for run, predictors in records.items():
+            record = dict(command=f"`{command}`", noise=list(args.noise), predictors=predictors)
+            write_result_record(run, record, RECORDS)
     return 0
 
 

@@ -19,20 +19,16 @@ import argparse
 import json
 import os
 import shutil
-import sys
 import time
 from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-
-from rheograph.io.index import read_index  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from publishing import publish
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
+from rheograph.io.index import read_index  # noqa: E402
 from rheograph.learn.train import run_stamps, stamps_differ  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

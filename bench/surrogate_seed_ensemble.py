@@ -16,15 +16,12 @@ import argparse
 import json
 import os
 import shutil
-import sys
 from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from publishing import publish
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 from rheograph.learn.module import fold_metrics  # noqa: E402

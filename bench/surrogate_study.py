@@ -209,7 +209,7 @@ def main(argv=None) -> None:
         + " ".join(args.runs)
         + "`; reports: docs/results/surrogate_study/.",
     ]
-    from simulate_speed import publish
+    from publishing import publish
 
     publish("surrogate_study", "\n".join(lines), write=not args.no_write)
 

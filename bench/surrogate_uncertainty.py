@@ -21,23 +21,20 @@ import glob
 import json
 import os
 import shutil
-import sys
 import time
 from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
+from publishing import publish
+from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 from rheograph.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
 from rheograph.io.snapshots import read_snapshots  # noqa: E402
 from rheograph.learn.error_model import error_scale  # noqa: E402
 from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402
 from rheograph.learn.predict import Surrogate  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
-from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LABELS = {"eta": "η_r", "pressure": "Π", "z_mu": "Z_μ"}

@@ -45,9 +45,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import write_section  # noqa: E402
+from publishing import replace_section
 from surrogate_study import VARIANTS, benchmark_config  # noqa: E402
 
 from rheograph.learn.module import regression_metrics  # noqa: E402
@@ -653,7 +651,7 @@ def main() -> None:
     text = render(rows, args)
     print(text)
     if not args.no_write:
-        write_section(ROOT / "docs" / "benchmarks.md", f"train_speed_{args.what}", text)
+        replace_section(ROOT / "docs" / "benchmarks.md", f"train_speed_{args.what}", text)
 
 
 if __name__ == "__main__":

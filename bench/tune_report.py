@@ -14,15 +14,12 @@ folds at the full budget is measured by bench/surrogate_study.py (variants ``<in
 from __future__ import annotations
 
 import argparse
-import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 import optuna
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import publish  # noqa: E402
+from publishing import publish
 
 ROOT = Path(__file__).resolve().parents[1]
 STORAGE = f"sqlite:///{ROOT / 'docs' / 'results' / 'tune' / 'optuna.db'}"

@@ -51,11 +51,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from publishing import command_line, replace_section
 
 from rheograph.io.hdf5 import POSITION_DECIMALS
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, write_section  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "vs_lfdem"
@@ -463,7 +461,9 @@ def main(argv=None) -> int:
         ]
         print("\n".join(lines), flush=True)
         if not args.no_write:
-            write_section(ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines), INSERT_BEFORE)
+            replace_section(
+                ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines), INSERT_BEFORE
+            )
     return 0
 
 

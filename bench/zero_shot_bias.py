@@ -17,8 +17,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from zero_shot_n import _noisy, trajectory_paths  # noqa: E402
 
 

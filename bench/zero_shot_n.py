@@ -27,9 +27,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from simulate_speed import command_line, publish  # noqa: E402
+from publishing import command_line, publish
 
 
 def _noisy(snaps, keep, eps: float, rng):

@@ -41,8 +41,12 @@ def tiny_files(tmp_path_factory):
 def load_bench_script(name: str):
     """A script of bench/ (not a package) imported as a module: ``load_bench_script("vs_lfdem")``."""
     import importlib.util
+    import sys
 
-    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
+    bench = Path(__file__).resolve().parents[1] / "bench"
+    if str(bench) not in sys.path:  # as when run as a script: the bench scripts import each other
+        sys.path.insert(0, str(bench))
+    path = bench / f"{name}.py"
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -1,38 +1,40 @@
-"""bench/noise_figure.py reads the published noise tables cell for cell and refuses a page without them."""
+"""bench/noise_figure.py draws the noise records of bench/snapshot_noise.py (JSON, one per scored run),
+which hold the published tables' numbers, and refuses a missing record in one line."""
+
+import json
+import re
+import shutil
 
 import pytest
 from conftest import load_bench_script
 
 
-def test_noise_figure_reads_the_published_tables_and_draws_them(tmp_path):
+def test_the_noise_records_hold_the_published_tables_and_the_figure_draws_them(tmp_path):
     bench = load_bench_script("noise_figure")
     page = (bench.ROOT / "docs" / "benchmarks.md").read_text()
-    section = "snapshot_noise_imaging"
-    eps, rows = bench.section_tables(page, section)
-    assert eps == [0.0, 0.001, 0.003, 0.01, 0.03, 0.05]
-    # every row the figure draws is there, one value per noise level, each the table's own cell
-    for _, name, exact, imaging, extra in bench.PANELS:
-        levels, table = bench.section_tables(page, name)
+    for _, exact, imaging, extra in bench.PANELS:
+        runs = dict.fromkeys(run for run, _, _ in bench.curves(exact, imaging, extra))
+        eps, rows = bench.run_records(bench.RECORDS, runs)
+        assert eps == [0.0, 0.001, 0.003, 0.01, 0.03, 0.05]
         for run, predictor, _ in bench.curves(exact, imaging, extra):
             for metric, _ in bench.TARGETS:
-                assert len(table[(run, predictor, metric)]) == len(levels)
-    start = page.index(f"<!-- {section}:start -->")
-    line = next(
-        s for s in page[start:].splitlines() if s.startswith("| graph network | R² log η_r |")
-    )  # the first run of the section, its network's log eta_r row
-    first_run = next(s for s in page[start:].splitlines() if s.startswith("**")).split("**")[1]
-    assert rows[(first_run, "graph network", "R² log η_r")] == [
-        float(c) for c in line.strip("| \n").split("|")[2:]
-    ]
+                values = rows[(run, predictor, metric)]
+                assert len(values) == len(eps)
+                # the published page shows the same numbers in the run's table
+                cells = " | ".join(f"{v:.3f}" for v in values)
+                assert f"| {predictor} | {metric} | {cells} |" in page, (run, predictor, metric)
     out = tmp_path / "noise.png"
     assert bench.main(["--out", str(out)]) == 0 and out.stat().st_size > 10_000
 
 
-def test_noise_figure_names_a_missing_section(tmp_path):
+def test_noise_figure_names_a_missing_or_damaged_record(tmp_path):
     bench = load_bench_script("noise_figure")
-    page = tmp_path / "benchmarks.md"
-    page.write_text("# Benchmarks\n")
-    with pytest.raises(SystemExit, match="no section snapshot_noise_phi070"):
-        bench.main(["--page", str(page), "--out", str(tmp_path / "x.png")])
-    with pytest.raises(SystemExit, match="--page .*: no such file"):
-        bench.main(["--page", str(tmp_path / "absent.md"), "--out", str(tmp_path / "x.png")])
+    records = tmp_path / "records"
+    shutil.copytree(bench.RECORDS, records)
+    (records / "N400_phi0.70.json").unlink()
+    with pytest.raises(SystemExit, match=re.escape("N400_phi0.70.json")):
+        bench.main(["--records", str(records), "--out", str(tmp_path / "x.png")])
+    (records / "N400_phi0.70.json").write_text("{cut")
+    with pytest.raises(SystemExit, match="not a readable result record of N400_phi0.70"):
+        bench.main(["--records", str(records), "--out", str(tmp_path / "x.png")])
+    json.loads((bench.RECORDS / "N400_phi0.70.json").read_text())  # the committed one untouched

@@ -104,8 +104,8 @@ def test_results_section_goes_before_the_surrogate_section_once(tmp_path, vs_lfd
         "## 3. Simulator speed\n\n<!-- simulate_speed:start -->\nT\n<!-- simulate_speed:end -->\n\nNotes.\n\n"
         "## 4. Surrogate accuracy on trajectories it has never seen\n\nS\n"
     )
-    vs_lfdem.write_section(doc, "vs_lfdem", "first", vs_lfdem.INSERT_BEFORE)
-    vs_lfdem.write_section(doc, "vs_lfdem", "second", vs_lfdem.INSERT_BEFORE)
+    vs_lfdem.replace_section(doc, "vs_lfdem", "first", vs_lfdem.INSERT_BEFORE)
+    vs_lfdem.replace_section(doc, "vs_lfdem", "second", vs_lfdem.INSERT_BEFORE)
     text = doc.read_text()
     assert text.count("<!-- vs_lfdem:start -->") == 1 and "first" not in text
     assert text.index("Notes.") < text.index("second") < text.index("## 4. Surrogate accuracy")

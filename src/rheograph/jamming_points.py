@@ -28,6 +28,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from rheograph.errors import InputError, one_line_errors
+from rheograph.io.pages import replace_section
 
 FRICTIONLESS_Z_MU = 0.02  # a sigma <= 0.5 run below this frictional coordination is on the mu = 0 branch
 BOOTSTRAP = 400
@@ -394,19 +395,6 @@ def markdown(rows: list[dict], command: str) -> str:
         )
     lines += ["", f"Command: `{command}`"]
     return "\n".join(lines)
-
-
-def replace_section(path: Path, name: str, body: str) -> None:
-    """Put ``body`` between ``<!-- name:start -->`` and ``<!-- name:end -->`` of ``path`` (appended, with
-    the markers, where they are absent)."""
-    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    text = path.read_text() if path.exists() else ""
-    block = f"{start}\n{body}\n{end}"
-    if start in text and end in text:
-        text = text[: text.index(start)] + block + text[text.index(end) + len(end) :]
-    else:
-        text = text.rstrip() + ("\n\n" if text else "") + block + "\n"
-    path.write_text(text)
 
 
 def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:

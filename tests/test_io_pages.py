@@ -1,0 +1,30 @@
+"""Published results: a page's marked section replaced in place, once; a result record read back whole or
+refused in one line naming it."""
+
+import pytest
+
+from rheograph.errors import InputError
+from rheograph.io.pages import read_record, replace_section, write_record
+
+
+def test_a_marked_section_is_replaced_in_place_and_the_rest_of_the_page_kept(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# T\n\nbefore\n\n<!-- s:start -->\nold\n<!-- s:end -->\n\nafter\n")
+    replace_section(page, "s", "new")
+    assert page.read_text() == "# T\n\nbefore\n\n<!-- s:start -->\nnew\n<!-- s:end -->\n\nafter\n"
+    replace_section(page, "t", "appended")  # markers absent, no heading to go before: appended
+    assert page.read_text().endswith("after\n\n<!-- t:start -->\nappended\n<!-- t:end -->\n")
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_a_record_round_trips_and_a_damaged_one_is_one_line(tmp_path):
+    path = tmp_path / "records" / "x.json"
+    write_record(path, {"command": "python bench/x.py", "values": [0.5, float("nan")]})
+    record = read_record(path, "result record of x")
+    assert record["command"] == "python bench/x.py" and record["values"][0] == 0.5
+    path.write_text("[1, 2]")
+    with pytest.raises(InputError, match="x.json: not a result record of x"):
+        read_record(path, "result record of x")
+    path.write_text('{"cut')
+    with pytest.raises(InputError, match="x.json: not a readable result record of x"):
+        read_record(path, "result record of x")
