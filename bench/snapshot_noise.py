@@ -128,13 +128,13 @@ def fold_rows(
         }
         trees = descriptor_trees(fitted, test)
         out[("trees on descriptors + σ", eps)] = (
-            physical_targets(trees, settings.viscosity_scale, settings.pressure_scale),
+            physical_targets(trees, settings.targets),
             true,
             groups,
             jammed,
             stress,
         )
-        rows = physics_rows(fitted, test, settings.viscosity_scale)
+        rows = physics_rows(fitted, test, settings.targets.viscosity_scale)
         out[("physics: one-solve η_r + offset, spring Π, counted Z_μ", eps)] = (
             rows["physics_offset"],
             true,

@@ -14,7 +14,7 @@ as corrections to them (graph=physics_solve, the default); ``physics_solve_uncor
 read through the head (an earlier default);
 ``physics_mean_pool`` = ``physics`` with mean pooling and softmax aggregation (ablation of the
 stress-like readout); ``physics_layer_norm`` = ``physics`` with layer instead of batch normalisation;
-``physics_pi_sigma0`` = ``physics`` learning Pi in sigma0 (graph.pressure_per_stress=false) with the
+``physics_pi_sigma0`` = ``physics`` learning Pi in sigma0 (graph.targets.pi.per_stress=false) with the
 weights that suited it (2/5/2): ablation of learning Pi in units of the imposed stress;
 ``<inputs>_tuned`` = the best trial of that input variant's Optuna study
 (``conf/experiment/<inputs>_phi076_best.yaml``, its own batch size).  Every run trains the K folds with
@@ -47,15 +47,15 @@ VARIANTS = {
     "physics_solve_uncorrected": [
         "graph=physics_solve",
         "model=resgcn_physics",
-        "graph.viscosity_on_solve=false",
-        "graph.z_mu_on_count=false",
+        "graph.targets.eta_r.relative_to=null",
+        "graph.targets.z_mu.relative_to=null",
     ],
     "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
     "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
     "physics_pi_sigma0": [
         "graph=physics",
         "model=resgcn_physics",
-        "graph.pressure_per_stress=false",
+        "graph.targets.pi.per_stress=false",
         "model.loss_weights=[2.0,5.0,2.0]",
     ],
     # the best trial of each input variant's Optuna study (bench/tune_report.py), with its batch size

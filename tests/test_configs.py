@@ -116,8 +116,8 @@ def test_training_experiments_compose(name, tiny_files):
 def test_search_configs_compose_one_study_per_input_variant(search, inputs):
     """Each study's fixed overrides and every corner of its search space compose a valid training
     config, and the study is named after its input variant (one study per variant)."""
-    from rheograph.learn.train import folds_to_train
-    from rheograph.learn.tune import fixed_overrides
+    from rheograph.learn.train import folds_to_train, graph_settings
+    from rheograph.learn.tune import _override, fixed_overrides
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="tune", overrides=[f"hparams_search={search}", f"inputs={inputs}"])
@@ -129,9 +129,10 @@ def test_search_configs_compose_one_study_per_input_variant(search, inputs):
             sampled = []
             for name, spec in space.items():
                 value = spec[corner] if corner in spec else spec["choices"][0 if corner == "low" else -1]
-                sampled.append(f"{name}={list(value) if isinstance(value, list) else value}")
+                sampled.append(_override(name, list(value) if isinstance(value, list) else value))
             train = compose(config_name="train", overrides=base + sampled)
             assert folds_to_train(train) == [0]
+            graph_settings(train)  # the graph settings and targets the corner trains with are valid
             assert (
                 train.graph.edge_features
                 == compose(config_name="train", overrides=[f"graph={inputs}"]).graph.edge_features
@@ -180,35 +181,50 @@ def test_every_surrogate_study_variant_composes_valid_graph_settings():
         for name, overrides in study.VARIANTS.items():
             settings = graph_settings(compose(config_name="train", overrides=overrides))
             knows_stress = "log_stress" in settings.graph_inputs
-            assert settings.pressure_per_stress == (knows_stress and name != "physics_pi_sigma0"), name
+            assert settings.targets.pi.per_stress == (knows_stress and name != "physics_pi_sigma0"), name
 
 
 def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
     """Runs trained before an option existed (data.train_fraction, model.global_mixing, the graph's
     corrections) keep their fingerprint at its neutral value (they resume and report as before); any
-    other value changes it — also the corrections' non-neutral default of graph=physics_solve."""
+    other value changes it — also the corrections' non-neutral default of graph=physics_solve.  The
+    target specification enters in the form of earlier versions (graph booleans and scales): a config of
+    that form fingerprints as the specification does."""
+    from rheograph.graphs.targets import LEGACY_GRAPH_KEYS, TargetSpec
     from rheograph.learn.train import NEUTRAL_LATER_OPTIONS, config_fingerprint
 
-    neutral = [f"{group}.{key}={str(value).lower()}" for group, key, value in NEUTRAL_LATER_OPTIONS]
+    options = [(g, k, v) for g, k, v in NEUTRAL_LATER_OPTIONS if k not in LEGACY_GRAPH_KEYS]
+    neutral = [f"{group}.{key}={str(value).lower()}" for group, key, value in options]
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name="train", overrides=["~logger", *neutral])
+        cfg = compose(config_name="train", overrides=["~logger", *neutral, "graph=physics"])
     current = config_fingerprint(cfg)
     earlier = OmegaConf.to_container(cfg)
-    for group, key, _ in NEUTRAL_LATER_OPTIONS:
+    for group, key, _ in options:
         earlier[group].pop(key)
+    legacy = TargetSpec.from_config(earlier["graph"].pop("targets")).legacy_options()
+    assert legacy["pressure_per_stress"] is True and not legacy["viscosity_on_solve"]
+    later = {k for g, k, _ in NEUTRAL_LATER_OPTIONS if k in LEGACY_GRAPH_KEYS}
+    earlier["graph"].update({k: v for k, v in legacy.items() if k not in later})  # before they existed
     assert config_fingerprint(OmegaConf.create(earlier)) == current
     for override in (
         "data.train_fraction=0.5",
         "model.global_mixing=virtual_node",
-        "graph.z_mu_on_count=true",
-        "graph.viscosity_on_solve=true",
+        "graph.targets.z_mu.relative_to=frictional_coordination",
+        "graph.targets.eta_r.relative_to=solve_viscosity",
+        "graph.targets.eta_r.relative_to=relaxed_viscosity",
+        "graph.targets.pi.per_stress=false",
+        "graph.targets.eta_r.scale=2.0",
         "graph.noise_range=[0.001,0.01]",
         "graph.noise_copies=2",
         "graph.relax_strain=0.01",
         "graph.stress_known=false",
         "model.on_state_mean=true",
     ):
-        changed_overrides = ["~logger", *[o for o in neutral if o.split("=")[0] != override.split("=")[0]]]
+        changed_overrides = [
+            "~logger",
+            *[o for o in neutral if o.split("=")[0] != override.split("=")[0]],
+            "graph=physics",
+        ]
         with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
             changed = compose(config_name="train", overrides=[*changed_overrides, override])
         assert config_fingerprint(changed) != current, override
@@ -226,9 +242,8 @@ def test_every_graph_and_model_option_is_in_the_default_config():
         cfg = compose(config_name="train")
     assert {f.name for f in dataclasses.fields(GraphSettings)} <= set(cfg.graph)
     # set by train.setup_fold from the data and the graph settings, not options of their own
-    derived = {"self", "node_in", "edge_in", "global_in", "viscosity_scale", "pressure_scale"}
-    derived |= {"pressure_per_stress", "state_mean_by_stress"}
-    derived |= {"z_mu_input", "viscosity_input", "pressure_input"}
+    derived = {"self", "node_in", "edge_in", "global_in", "targets", "graph_inputs"}
+    derived |= {"state_mean_by_stress"}
     options = set(inspect.signature(SurrogateModule.__init__).parameters) - derived
     assert options <= set(cfg.model), options - set(cfg.model)
 

@@ -17,6 +17,7 @@ from rheograph.graphs.features import (
     shell_inputs,
     snapshot_pairs,
 )
+from rheograph.graphs.targets import Target, TargetSpec
 from rheograph.io.configurations import wrap_into_box
 from rheograph.io.snapshots import read_snapshots
 
@@ -24,7 +25,7 @@ ROOT_DATA = Path(__file__).resolve().parents[1] / "data" / "paper" / "multirun"
 IMAGING = dict(
     edge_features=("gap", "dx", "dy", "nxny", "nxx_nyy"),
     graph_inputs=("log_stress", "position_noise", *SHELL_INPUTS),
-    pressure_per_stress=True,
+    targets=TargetSpec(pi=Target(scale=0.1, per_stress=True)),
     noise_range=(1e-3, 0.03),
     min_strain=0.05,
 )
@@ -104,16 +105,16 @@ def test_noisy_graphs_redraw_fresh_noise_and_keep_targets(tiny_files):
             dict(graph_inputs=("position_noise", "relaxed_pressure"), noise_copies=2, relax_strain=0.01),
             "log_stress",
         ),
-        (dict(viscosity_on_relaxed=True, noise_copies=2, relax_strain=0.01), "add relaxed_viscosity"),
         (
             dict(
-                graph_inputs=("log_stress", "solve_viscosity", "relaxed_viscosity"),
-                viscosity_on_solve=True,
-                viscosity_on_relaxed=True,
+                targets=TargetSpec(
+                    eta_r=Target(scale=1.0, relative_to="relaxed_viscosity"),
+                    pi=Target(scale=0.1, per_stress=True),
+                ),
                 noise_copies=2,
                 relax_strain=0.01,
             ),
-            "set one of them to false",
+            "add relaxed_viscosity",
         ),
     ],
 )
@@ -290,7 +291,7 @@ def test_a_model_on_the_state_mean_predicts_the_lookup_when_its_network_says_not
     graphs = [g for f in tiny_files for g in snapshot_graphs(read_snapshots(f), settings, run_id=0)]
     batch = next(iter(DataLoader(graphs, batch_size=len(graphs))))
     module = SurrogateModule(
-        edge_in=len(settings.edge_features), global_in=len(settings.graph_inputs), pressure_per_stress=True,
+        edge_in=len(settings.edge_features), global_in=len(settings.graph_inputs), targets=settings.targets,
         on_state_mean=True,
     )  # fmt: skip
     module.fit_target_scaling(batch.y, batch.stress, batch.u, phi=batch.phi, jammed=batch.jammed)

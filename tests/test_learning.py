@@ -17,6 +17,7 @@ from torch_geometric.data import Batch
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset, snapshot_graphs
 from rheograph.graphs.features import forward_transform, inverse_transform, snapshot_edges
+from rheograph.graphs.targets import Target, TargetSpec
 from rheograph.io.snapshots import read_snapshots
 from rheograph.learn.datamodule import SnapshotDataModule, kfold_assignment
 from rheograph.learn.model import ResGCN
@@ -330,8 +331,8 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             "model.dropout=0.0",
             # Pi in sigma0: its spread over the three stresses is the learnable signal asserted below
             # (Pi / sigma of N = 64 snapshots is mostly noise)
-            "graph.pressure_per_stress=false",
-            "graph.pressure_on_spring=false",
+            "graph.targets.pi.per_stress=false",
+            "graph.targets.pi.relative_to=null",
         ]
     )
     run_dir = tmp_path / "run"
@@ -761,7 +762,7 @@ def test_descriptors_count_the_simulators_contacts_and_sum_the_features(tiny_fil
 
 
 def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_files, tmp_path):
-    """``graph.pressure_per_stress``: the network's Pi target is Pi/sigma; predictions come back in sigma0.
+    """``graph.targets.pi.per_stress``: the network's Pi target is Pi/sigma; predictions come back in sigma0.
     A network that outputs the training mean then predicts Pi proportional to sigma (the frictional
     plateau's scaling), and the standardised Pi target no longer spans the decades of sigma."""
     from rheograph.errors import InputError
@@ -780,22 +781,25 @@ def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_f
     batch = Batch.from_data_list(graphs)
     spread = {}
     for per_stress in (False, True):
-        module = SurrogateModule(edge_in=6, global_in=1, pressure_per_stress=per_stress).eval()
+        per = TargetSpec(pi=Target(scale=0.1, per_stress=per_stress))
+        module = SurrogateModule(edge_in=6, global_in=1, targets=per).eval()
         module.fit_target_scaling(batch.y, batch.stress, batch.u)
         spread[per_stress] = float(module.target_std[1])
         module._net = lambda b: torch.zeros(b.num_graphs, 3)  # the standardised mean
-        pressure = inverse_transform(module(batch)[:, 1].double().numpy(), settings.pressure_scale)
+        pressure = inverse_transform(module(batch)[:, 1].double().numpy(), settings.targets.pressure_scale)
         ratio = pressure / batch.stress.numpy()
         assert (np.ptp(ratio) < 1e-4 * ratio.mean()) == per_stress
     # 0.5 to 50 sigma0: Pi spans two decades in sigma0, Pi/sigma a factor of a few
     assert spread[True] < 0.5 * spread[False]
     # sigma must be an input of the model that uses it
     with pytest.raises(InputError, match="log_stress"):
-        GraphSettings(pressure_per_stress=True)
+        GraphSettings(targets=TargetSpec(pi=Target(scale=0.1, per_stress=True)))
     # the graphs do not depend on how the model reads Pi: one cache
     caches = [
         SnapshotGraphDataset(
-            tiny_files[:1], dataclasses.replace(settings, pressure_per_stress=flag), tmp_path
+            tiny_files[:1],
+            dataclasses.replace(settings, targets=TargetSpec(pi=Target(scale=0.1, per_stress=flag))),
+            tmp_path,
         )
         for flag in (False, True)
     ]
@@ -969,11 +973,9 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
     assert "computed_inputs" not in plain
     half = np.arange(len(dataset)) % 2 == 0
     split = [{k: v[m] for k, v in arrays.items()} for m in (half, ~half)]
-    with_solve = baseline_predictions(*split, settings.viscosity_scale, settings.pressure_scale)
+    with_solve = baseline_predictions(*split, settings.targets)
     without = baseline_predictions(
-        *[{k: v[m] for k, v in plain.items()} for m in (half, ~half)],
-        settings.viscosity_scale,
-        settings.pressure_scale,
+        *[{k: v[m] for k, v in plain.items()} for m in (half, ~half)], settings.targets
     )
     assert set(with_solve) == set(without) | {"descriptors_solve"}  # the reference baselines stay as defined
     np.testing.assert_allclose(with_solve["descriptors"], without["descriptors"])
@@ -983,36 +985,41 @@ def test_solve_viscosity_graph_input_reaches_the_graphs_and_the_trees(tiny_files
 
 
 def test_z_mu_on_count_learns_the_correction_and_predicts_the_count_from_a_zero_output(tiny_files):
-    """graph.z_mu_on_count: the learned Z_mu target is Z_mu minus the counted frictional coordination
+    """graph.targets.z_mu.relative_to=frictional_coordination: the learned Z_mu target is Z_mu minus the
+    counted frictional coordination
     (zero here: the count is Z_mu), a network output of zero correction predicts the count; refused
     without the count among the graph inputs."""
     from rheograph.errors import InputError
     from rheograph.learn.module import SurrogateModule
 
     inputs = ("log_stress", "frictional_coordination")
-    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, z_mu_on_count=True)
+    on_count = TargetSpec(z_mu=Target(relative_to="frictional_coordination"))
+    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, targets=on_count)
     batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
-    module = SurrogateModule(edge_in=6, global_in=2, z_mu_input=1).eval()
+    module = SurrogateModule(edge_in=6, global_in=2, targets=on_count, graph_inputs=inputs).eval()
+    assert module.reference_columns == [(2, 1)]
     module.fit_target_scaling(batch.y, batch.stress, batch.u)
     assert abs(float(module.target_mean[2])) < 1e-6  # Z_mu - count = 0 for every snapshot
     module._net = lambda b: torch.zeros(b.num_graphs, 3)
     torch.testing.assert_close(module(batch)[:, 2].float(), batch.u[:, 1], atol=1e-5, rtol=0)
     with pytest.raises(InputError, match="frictional_coordination"):
-        GraphSettings(graph_inputs=("log_stress",), z_mu_on_count=True)
+        GraphSettings(graph_inputs=("log_stress",), targets=on_count)
 
 
 def test_viscosity_on_solve_learns_the_correction_to_the_one_solve_viscosity(tiny_files):
-    """graph.viscosity_on_solve: the learned eta_r target is the transformed eta_r minus the transformed
-    one-solve viscosity; a network output of zero correction (the learned mean) predicts the solve
-    shifted by the training mean correction, so a target equal to the solve plus a constant is learned
-    exactly; refused without solve_viscosity among the graph inputs."""
+    """graph.targets.eta_r.relative_to=solve_viscosity: the learned eta_r target is the transformed eta_r
+    minus the transformed one-solve viscosity; a network output of zero correction (the learned mean)
+    predicts the solve shifted by the training mean correction, so a target equal to the solve plus a
+    constant is learned exactly; refused without solve_viscosity among the graph inputs."""
     from rheograph.errors import InputError
     from rheograph.learn.module import SurrogateModule
 
     inputs = ("log_stress", "solve_viscosity")
-    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, viscosity_on_solve=True)
+    on_solve = TargetSpec(eta_r=Target(scale=1.0, relative_to="solve_viscosity"))
+    settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, targets=on_solve)
     batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
-    module = SurrogateModule(edge_in=6, global_in=2, viscosity_input=1).eval()
+    module = SurrogateModule(edge_in=6, global_in=2, targets=on_solve, graph_inputs=inputs).eval()
+    assert module.reference_columns == [(0, 1)]
     correction = (batch.y[:, 0] - batch.u[:, 1]).double()
     assert float(correction.std()) > 0  # the recorded eta_r is not the one-solve value: a real target
     module.fit_target_scaling(batch.y, batch.stress, batch.u)
@@ -1023,7 +1030,7 @@ def test_viscosity_on_solve_learns_the_correction_to_the_one_solve_viscosity(tin
     module._net = lambda b: z
     torch.testing.assert_close(module(batch)[:, 0].float(), batch.y[:, 0], atol=1e-5, rtol=0)
     with pytest.raises(InputError, match="solve_viscosity"):
-        GraphSettings(graph_inputs=("log_stress",), viscosity_on_solve=True)
+        GraphSettings(graph_inputs=("log_stress",), targets=on_solve)
 
 
 def test_target_loss_compares_models_that_learn_in_different_spaces(tiny_files):
@@ -1038,7 +1045,14 @@ def test_target_loss_compares_models_that_learn_in_different_spaces(tiny_files):
     batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
     plain = SurrogateModule(edge_in=6, global_in=3)
     corrected = SurrogateModule(
-        edge_in=6, global_in=3, viscosity_input=1, z_mu_input=2, pressure_per_stress=True
+        edge_in=6,
+        global_in=3,
+        targets=TargetSpec(
+            eta_r=Target(scale=1.0, relative_to="solve_viscosity"),
+            pi=Target(scale=0.1, per_stress=True),
+            z_mu=Target(relative_to="frictional_coordination"),
+        ),
+        graph_inputs=inputs,
     )
     pred = batch.y + torch.tensor([0.05, -0.1, 0.2])
     scored = torch.ones_like(pred)
@@ -1070,7 +1084,10 @@ def test_target_loss_compares_models_that_learn_in_different_spaces(tiny_files):
             "model.scheduler.warmup_epochs=-1 is invalid",
         ),
         (lambda: _module(huber_beta=-1.0), "model.huber_beta=-1.0 is invalid"),
-        (lambda: GraphSettings(viscosity_scale=float("nan")), "graph.viscosity_scale=nan is invalid"),
+        (
+            lambda: GraphSettings(targets={"eta_r": {"scale": float("nan")}}),
+            "graph.targets.eta_r.scale=nan is invalid",
+        ),
     ],
 )
 def test_model_and_graph_options_are_refused_by_name(build, message):

@@ -9,7 +9,7 @@ import logging
 import math
 import os
 import shutil
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,7 @@ from rheograph.graphs.features import (
     snapshot_edges,
     solve_viscosity,
 )
+from rheograph.graphs.targets import TargetSpec
 from rheograph.io.configurations import Snapshots, refuse_3d, wrap_into_box
 from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.io.snapshots import read_snapshots
@@ -51,8 +52,7 @@ log = logging.getLogger("rheograph.graphs")
 @dataclass(frozen=True)
 class GraphSettings:
     """Everything that determines a graph and its targets (hashed into the cache directory name, except
-    the options that only say how the model reads the targets: ``pressure_per_stress``,
-    ``z_mu_on_count``, ``viscosity_on_solve``, ``viscosity_on_relaxed``, ``pressure_on_spring``)."""
+    what the targets are learned relative to, and Pi per stress: how the model reads the targets)."""
 
     cutoff: float = 0.5  # edge if surface gap < cutoff * a (small radius)
     edge_features: tuple = PAPER_EDGE_FEATURES
@@ -64,20 +64,9 @@ class GraphSettings:
     # > 1: only every k-th of a trajectory's training snapshots (after min_strain): consecutive snapshots
     # of a large box are strongly correlated, and each costs a relaxation when relax_strain is set
     snapshot_every: int = 1
-    viscosity_scale: float = 1.0  # asinh scale of eta_r (log-like above a few times the scale)
-    pressure_scale: float = 0.1  # asinh scale of Pi [sigma0]: linear through the noisy Pi ~ 0 region
-    # the model learns Pi in units of the imposed stress (SurrogateModule): needs log_stress as an input
-    pressure_per_stress: bool = False
-    # the model learns Z_mu as a correction to the counted frictional_coordination (a graph input)
-    z_mu_on_count: bool = False
-    # the model learns eta_r as a correction to the one-solve viscosity solve_viscosity (a graph input)
-    viscosity_on_solve: bool = False
-    # the model learns eta_r as a correction to the relaxation's own eta_r relaxed_viscosity (a graph
-    # input; needs relax_strain)
-    viscosity_on_relaxed: bool = False
-    # the model learns Pi / sigma as a correction to the contact-spring pressure spring_pressure (a graph
-    # input); needs pressure_per_stress
-    pressure_on_spring: bool = False
+    # each target's transform (asinh scale, also of the graph inputs that are transformed like it), the
+    # graph input it is learned relative to, and Pi per imposed stress (rheograph.graphs.targets)
+    targets: TargetSpec = field(default_factory=TargetSpec)
     # training on imprecise positions: (eps_min, eps_max) [a], each training graph rebuilt every epoch
     # from its positions plus fresh Gaussian noise of eps per coordinate, eps log-uniform in the range
     # (validation and test graphs: one fixed draw each); empty: exact positions (NoisyGraphs)
@@ -96,6 +85,7 @@ class GraphSettings:
     stress_known: bool = True
 
     def __post_init__(self):
+        object.__setattr__(self, "targets", TargetSpec.from_config(self.targets))
         if not 0.0 < self.cutoff <= 5.0:
             raise InputError(f"graph.cutoff={self.cutoff} is invalid: allowed 0 < cutoff <= 5 (units of a)")
         unknown = set(self.edge_features) - set(EDGE_FEATURES)
@@ -109,10 +99,6 @@ class GraphSettings:
             raise InputError(
                 f"graph.graph_inputs={list(self.graph_inputs)}: allowed a subset of {list(GRAPH_INPUTS)}"
             )
-        for name in ("viscosity_scale", "pressure_scale"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise InputError(f"graph.{name}={value} is invalid: allowed a finite value > 0")
         computed = [
             name for name in self.graph_inputs if name in COMPUTED_GRAPH_INPUTS + RELAXED_GRAPH_INPUTS
         ]
@@ -121,39 +107,12 @@ class GraphSettings:
                 f"graph.graph_inputs: {computed} are computed at the imposed stress, which the model "
                 f"must then be given too: add log_stress (now {list(self.graph_inputs)})"
             )
-        if self.z_mu_on_count and "frictional_coordination" not in self.graph_inputs:
-            raise InputError(
-                "graph.z_mu_on_count=true learns Z_mu as a correction to the counted frictional contacts: "
-                f"add frictional_coordination to graph.graph_inputs (now {list(self.graph_inputs)})"
-            )
-        if self.viscosity_on_solve and "solve_viscosity" not in self.graph_inputs:
-            raise InputError(
-                "graph.viscosity_on_solve=true learns eta_r as a correction to the one-solve viscosity: "
-                f"add solve_viscosity to graph.graph_inputs (now {list(self.graph_inputs)})"
-            )
-        if self.viscosity_on_relaxed and "relaxed_viscosity" not in self.graph_inputs:
-            raise InputError(
-                "graph.viscosity_on_relaxed=true learns eta_r as a correction to the relaxation's eta_r: "
-                f"add relaxed_viscosity to graph.graph_inputs (now {list(self.graph_inputs)})"
-            )
-        if self.viscosity_on_relaxed and self.viscosity_on_solve:
-            raise InputError(
-                "graph.viscosity_on_solve and graph.viscosity_on_relaxed each set the value eta_r is "
-                "learned as a correction to: set one of them to false"
-            )
+        self.targets.columns(self.graph_inputs)  # every reference among the inputs
         relaxed_inputs = [name for name in self.graph_inputs if name in RELAXED_GRAPH_INPUTS]
         if relaxed_inputs and not self.relax_strain:
             raise InputError(
                 f"graph.graph_inputs: {relaxed_inputs} are measured while relaxing the snapshot: set "
                 "graph.relax_strain > 0 (e.g. 0.01) or drop them"
-            )
-        if self.pressure_on_spring and not (
-            self.pressure_per_stress and "spring_pressure" in self.graph_inputs
-        ):
-            raise InputError(
-                "graph.pressure_on_spring=true learns Pi / sigma as a correction to the contact-spring "
-                "pressure: needs graph.pressure_per_stress=true and spring_pressure in graph.graph_inputs "
-                f"(now {list(self.graph_inputs)})"
             )
         if self.noise_range:
             low, high = (tuple(self.noise_range) + (None, None))[:2]
@@ -207,22 +166,13 @@ class GraphSettings:
                     f"{uses + (['relax_strain'] if self.relax_strain else [])} need the imposed stress; "
                     "drop them"
                 )
-            if not self.pressure_per_stress:
-                raise InputError(
-                    "graph.stress_known=false needs graph.pressure_per_stress=true: positions determine "
-                    "Pi / sigma, not Pi in sigma0"
-                )
-        if self.pressure_per_stress and "log_stress" not in self.graph_inputs and self.stress_known:
-            raise InputError(
-                "graph.pressure_per_stress=true learns Pi in units of the imposed stress, which the model "
-                f"must then be given: add log_stress to graph.graph_inputs (now {list(self.graph_inputs)})"
-            )
+        self.targets.check_inputs(self.graph_inputs, self.stress_known)
 
     def transform_targets(self, eta, pressure, z_mu) -> np.ndarray:
         return np.stack(
             [
-                forward_transform(eta, self.viscosity_scale),
-                forward_transform(pressure, self.pressure_scale),
+                forward_transform(eta, self.targets.viscosity_scale),
+                forward_transform(pressure, self.targets.pressure_scale),
                 np.asarray(z_mu, dtype=np.float64),
             ],
             axis=-1,
@@ -430,7 +380,7 @@ def snapshot_graph(
     solvable = "disp_max" in params and np.isfinite(stress)
     eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if solvable else np.nan
     known = {"log_stress": np.log(stress), **conditions}
-    known["solve_viscosity"] = float(forward_transform(eta, settings.viscosity_scale))
+    known["solve_viscosity"] = float(forward_transform(eta, settings.targets.viscosity_scale))
     edge_index, feats, pairs = snapshot_edges(
         positions, radii, lx, ly, le_offset, settings.cutoff, params, contacts
     )
@@ -440,16 +390,20 @@ def snapshot_graph(
     # contact-spring pressure (2 pi sigma / A) sum r a_bar overlap [sigma0] (overlap in delta_sigma),
     # and the counted frictional contacts
     physics = [eta, 2.0 * np.pi * stress * descriptors[3], known["frictional_coordination"]]
-    known["spring_pressure"] = float(forward_transform(2.0 * np.pi * descriptors[3], settings.pressure_scale))
+    known["spring_pressure"] = float(
+        forward_transform(2.0 * np.pi * descriptors[3], settings.targets.pressure_scale)
+    )
     if set(settings.graph_inputs) & set(SHELL_INPUTS):
         known.update(shell_inputs(pairs, radii.size))
     if relaxation is not None:
-        known["relaxed_viscosity"] = float(forward_transform(relaxation.viscosity, settings.viscosity_scale))
+        known["relaxed_viscosity"] = float(
+            forward_transform(relaxation.viscosity, settings.targets.viscosity_scale)
+        )
         known["relaxed_viscosity_early"] = float(
-            forward_transform(relaxation.viscosity_early, settings.viscosity_scale)
+            forward_transform(relaxation.viscosity_early, settings.targets.viscosity_scale)
         )
         known["relaxed_pressure"] = float(
-            forward_transform(relaxation.pressure / stress, settings.pressure_scale)
+            forward_transform(relaxation.pressure / stress, settings.targets.pressure_scale)
         )
         known["relaxed_coordination"] = relaxation.z_mu
     elif set(settings.graph_inputs) & set(RELAXED_GRAPH_INPUTS):
@@ -606,11 +560,14 @@ class SnapshotGraphDataset(InMemoryDataset):
         key = json.dumps(
             {
                 # how the model reads the targets, not the graphs: left out of the cache key
+                # (the targets in the form of earlier versions, in which the key stays what it was: the
+                # scales transform the targets and some inputs, the rest only how the model reads them)
                 "settings": {
                     k: v
-                    for k, v in asdict(settings).items()
+                    for k, v in {**asdict(settings), **settings.targets.legacy_options()}.items()
                     if k
                     not in (
+                        "targets",
                         "pressure_per_stress",
                         "z_mu_on_count",
                         "viscosity_on_solve",

@@ -81,9 +81,10 @@ def descriptor_ridge(train: dict, test: dict, alpha: float = 1e-3) -> np.ndarray
     return b @ coef
 
 
-def baseline_predictions(train: dict, test: dict, viscosity_scale: float, pressure_scale: float) -> dict:
+def baseline_predictions(train: dict, test: dict, targets) -> dict:
     """Physical predictions (G_test, 3) of every baseline.  ``train``/``test``: dicts of arrays
-    ``y`` (transformed targets, (G, 3)), ``descriptors`` (G, 8), ``stress`` (G,), ``phi`` (G,)."""
+    ``y`` (transformed targets, (G, 3)), ``descriptors`` (G, 8), ``stress`` (G,), ``phi`` (G,);
+    ``targets``: their transforms (rheograph.graphs.targets.TargetSpec)."""
     raw = {
         "stress_mean": stress_mean(train, test),
         "descriptors": descriptor_trees(train, test),
@@ -91,9 +92,9 @@ def baseline_predictions(train: dict, test: dict, viscosity_scale: float, pressu
     }
     if "computed_inputs" in train:
         raw["descriptors_solve"] = descriptor_trees(train, test, with_solve=True)
-    out = {name: physical_targets(pred, viscosity_scale, pressure_scale) for name, pred in raw.items()}
+    out = {name: physical_targets(pred, targets) for name, pred in raw.items()}
     if np.isfinite(test["physics"][:, 0]).all():  # every snapshot had its solve
-        out.update(physics_rows(train, test, viscosity_scale))
+        out.update(physics_rows(train, test, targets.viscosity_scale))
     return out
 
 
@@ -155,7 +156,7 @@ def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
     fitted = np.r_[split["train"], split["val"]]  # as the baselines: no early stopping to hold out for
     test = np.asarray(split["test"])
     rows = physics_rows(
-        dataset_arrays(dataset, fitted), dataset_arrays(dataset, test), settings.viscosity_scale
+        dataset_arrays(dataset, fitted), dataset_arrays(dataset, test), settings.targets.viscosity_scale
     )
     true = dataset.y_raw[test].numpy()
     groups = state_point_key(dataset.phi[test].numpy(), dataset.stress[test].numpy())

@@ -20,14 +20,16 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
+from rheograph.graphs.targets import LEGACY_GRAPH_KEYS, LEGACY_MODULE_KEYS, from_legacy, spec_of_record
 from rheograph.learn.datamodule import suspension_record
 from rheograph.learn.module import SurrogateModule, network_hparams, physical_targets
 from rheograph.learn.networks import registered_network
 
-BUNDLE_FORMAT = "rheograph-surrogate-3"
-# format 2 (before bundles were Lightning checkpoints): the hyperparameters under "hparams"; read through
-# _upgraded, the one place that knows it
-OLDER_FORMATS = ("rheograph-surrogate-2",)
+BUNDLE_FORMAT = "rheograph-surrogate-4"
+# read through _upgraded, the one place that knows them: format 3 states the targets in the form of
+# earlier versions (graph booleans and scales, module columns: rheograph.graphs.targets.from_legacy);
+# format 2 (before bundles were Lightning checkpoints) also holds the hyperparameters under "hparams"
+OLDER_FORMATS = ("rheograph-surrogate-3", "rheograph-surrogate-2")
 
 
 def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str, domain: dict) -> None:
@@ -52,6 +54,7 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
             "hyper_parameters": hp,  # Lightning's key: load_from_checkpoint rebuilds the module from them
             "graph": {
                 **settings.__dict__,
+                "targets": settings.targets.to_config(),
                 "edge_features": list(settings.edge_features),
                 "graph_inputs": list(settings.graph_inputs),
                 "noise_range": list(settings.noise_range),
@@ -97,23 +100,35 @@ def read_bundle(path: str | Path) -> dict:
             f"{path}: not a rheograph model bundle ({BUNDLE_FORMAT}); bundles of older versions must be "
             "retrained"
         )
-    return _upgraded(bundle)
+    try:
+        return _upgraded(bundle)
+    except InputError as exc:  # its records of the targets contradict each other
+        raise InputError(f"{path}: a damaged rheograph model bundle ({exc})") from exc
 
 
 def _upgraded(bundle: dict) -> dict:
-    """A bundle of an older format in the current one (the weights and every record unchanged)."""
+    """A bundle of an older format in the current one (the weights and every other record unchanged; the
+    targets as a specification, through rheograph.graphs.targets.from_legacy)."""
     if bundle["format"] == BUNDLE_FORMAT:
         return bundle
     import lightning as L
 
     upgraded = {k: v for k, v in bundle.items() if k != "hparams"}
-    upgraded.update(
-        {
-            "format": BUNDLE_FORMAT,
-            "hyper_parameters": bundle.get("hparams"),
-            "pytorch-lightning_version": L.__version__,
+    if bundle["format"] == "rheograph-surrogate-2":
+        upgraded["hyper_parameters"] = bundle.get("hparams")
+    upgraded.update({"format": BUNDLE_FORMAT, "pytorch-lightning_version": L.__version__})
+    graph, hparams = upgraded.get("graph"), upgraded.get("hyper_parameters")
+    if isinstance(graph, dict) and isinstance(hparams, dict):
+        targets = from_legacy(graph, hparams).to_config()
+        upgraded["graph"] = {
+            **{k: v for k, v in graph.items() if k not in LEGACY_GRAPH_KEYS},
+            "targets": targets,
         }
-    )
+        upgraded["hyper_parameters"] = {
+            **{k: v for k, v in hparams.items() if k not in LEGACY_MODULE_KEYS},
+            "targets": targets,
+            "graph_inputs": list(graph.get("graph_inputs", ())),
+        }
     return upgraded
 
 
@@ -123,7 +138,8 @@ def bundle_graph_settings(bundle: dict) -> GraphSettings:
     graph["edge_features"] = tuple(graph["edge_features"])
     graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
     graph["noise_range"] = tuple(graph.get("noise_range", ()))
-    return GraphSettings(**graph)
+    graph["targets"] = spec_of_record(graph)
+    return GraphSettings(**{k: v for k, v in graph.items() if k not in LEGACY_GRAPH_KEYS})
 
 
 def load_bundle(
@@ -179,8 +195,7 @@ def predict_dataset(module, dataset, batch_size: int = 64, device=None):
         run.append(batch.run_id.numpy())
         jammed.append(batch.jammed.numpy())
         size.append(batch.n_particles.numpy())
-    hp = module.hparams
-    pred = physical_targets(np.concatenate(preds), hp.viscosity_scale, hp.pressure_scale)
+    pred = physical_targets(np.concatenate(preds), module.targets)
     return (
         pred,
         np.concatenate(trues),

@@ -14,6 +14,7 @@ from torch import nn
 
 from rheograph.errors import InputError
 from rheograph.graphs.features import inverse_transform
+from rheograph.graphs.targets import TargetSpec, from_legacy, is_legacy
 from rheograph.learn.model import ResGCN
 
 log = logging.getLogger("rheograph")
@@ -81,11 +82,16 @@ def network_hparams(hparams: dict, module_class: type | None = None) -> dict:
     return {k: v for k, v in hparams.items() if k in accepted}
 
 
-def physical_targets(y_transformed: np.ndarray, viscosity_scale: float, pressure_scale: float) -> np.ndarray:
-    """Invert the target transforms: (G, 3) transformed -> (G, 3) [eta_r, Pi, Z_mu] in physical units."""
+def physical_targets(y_transformed: np.ndarray, targets: TargetSpec) -> np.ndarray:
+    """Invert the target transforms of ``targets``: (G, 3) transformed -> (G, 3) [eta_r, Pi, Z_mu] in
+    physical units."""
     y = np.asarray(y_transformed, dtype=np.float64)
     return np.stack(
-        [inverse_transform(y[:, 0], viscosity_scale), inverse_transform(y[:, 1], pressure_scale), y[:, 2]],
+        [
+            inverse_transform(y[:, 0], targets.viscosity_scale),
+            inverse_transform(y[:, 1], targets.pressure_scale),
+            y[:, 2],
+        ],
         axis=1,
     )
 
@@ -318,27 +324,30 @@ class SurrogateModule(L.LightningModule):
     params -> torch optimiser; ``scheduler``: (optimiser, max_epochs=) -> torch scheduler, stepped per
     epoch, or None for a constant rate), as Hydra's ``model.optimizer`` / ``model.scheduler``.
 
-    ``target_mean``/``target_std`` (fitted on the training fold) and the transform scales are buffers /
-    hyperparameters, so a checkpoint alone maps graphs to physical eta_r, Pi, Z_mu.
+    ``target_mean``/``target_std`` (fitted on the training fold) and the target specification
+    (``targets``, rheograph.graphs.targets: each target's transform and what it is learned relative to)
+    are buffers / hyperparameters, so a checkpoint alone maps graphs to physical eta_r, Pi, Z_mu.
+    ``graph_inputs`` names the columns of the graph inputs u: the references of ``targets`` are found
+    among them (``TargetSpec.columns``).
 
-    With ``pressure_per_stress`` the network learns Pi in units of the imposed stress sigma (the graph's
+    With ``targets.pi.per_stress`` the network learns Pi in units of the imposed stress sigma (the graph's
     ``stress``) and the module converts back to sigma0.  Why: with k_n proportional to sigma the contact
     stress over sigma is a function of the positions (physics.md), and in sigma0 the 2.6 decades of the
     imposed stress dominate the standardised Pi target, so a snapshot's own fluctuation and a few per cent
     of bias at one state point weigh almost nothing in the loss.  Needs sigma known at prediction time
     (``log_stress`` among the graph inputs).
 
-    With ``z_mu_input`` >= 0 (the column of the graph inputs u holding the counted frictional
-    coordination) the network learns Z_mu minus that count: with the CLM the count is Z_mu itself, so the
+    With ``targets.z_mu.relative_to`` = frictional_coordination (the counted frictional coordination, a
+    graph input) the network learns Z_mu minus that count: with the CLM the count is Z_mu itself, so the
     network only has to learn (close to) nothing instead of copying an input through its head.  Likewise
-    ``viscosity_input`` >= 0 (the column holding the one-solve viscosity, or the relaxed configuration's,
-    transformed like the eta_r target): the network learns the correction to it, which for the
+    ``targets.eta_r.relative_to`` (the one-solve viscosity, or the relaxed configuration's, transformed
+    like the eta_r target): the network learns the correction to it, which for the
     one-solve the contact history sets (|log10 ratio| <= 0.16 with a within-state spread <= 0.08 at
     phi <= 0.78, against 1.3 decades of eta_r), so a model that meets a new area fraction extrapolates
-    a small correction rather than eta_r itself.  And
-    ``pressure_input`` >= 0 (the column holding the contact-spring pressure per stress, on the Pi
-    target's asinh scale; needs ``pressure_per_stress``): the network learns Pi / sigma minus it, the
-    lubrication and dashpot parts and what the springs' sum misses.
+    a small correction rather than eta_r itself.  And ``targets.pi.relative_to`` = spring_pressure (the
+    contact-spring pressure per stress, on the Pi target's asinh scale; needs ``targets.pi.per_stress``):
+    the network learns Pi / sigma minus it, the lubrication and dashpot parts and what the springs' sum
+    misses.
     """
 
     def __init__(
@@ -360,16 +369,20 @@ class SurrogateModule(L.LightningModule):
         scheduler=None,
         loss_weights=(1.0, 1.0, 1.0),
         huber_beta: float = 1.0,
-        viscosity_scale: float = 1.0,
-        pressure_scale: float = 0.1,
-        pressure_per_stress: bool = False,
-        z_mu_input: int = -1,
-        viscosity_input: int = -1,
-        pressure_input: int = -1,
+        targets=None,
+        graph_inputs=(),
         on_state_mean: bool = False,
         state_mean_by_stress: bool = True,
     ):
         super().__init__()
+        self.targets = TargetSpec.from_config(targets)
+        if graph_inputs and len(graph_inputs) != global_in:
+            raise InputError(
+                f"graph_inputs={list(graph_inputs)} names {len(graph_inputs)} columns, global_in={global_in}"
+            )
+        # (target, graph-input column) of every target learned relative to an input
+        self.reference_columns = self.targets.columns(graph_inputs)
+        targets, graph_inputs = self.targets.to_config(), list(graph_inputs)  # hyperparameters: plain values
         # the optimiser and schedule are how a network is trained, not what it is: a checkpoint rebuilds
         # the network without them (they stay in the run's Hydra config)
         self.save_hyperparameters(ignore=["optimizer", "scheduler"])
@@ -413,10 +426,21 @@ class SurrogateModule(L.LightningModule):
         self.huber = nn.SmoothL1Loss(beta=huber_beta, reduction="none")
         self._outputs = {"train": [], "val": [], "test": []}
 
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        """A checkpoint of an earlier version (a shipped model's bundle read by Lightning's
+        ``load_from_checkpoint``) states its targets in the form of that version, which Lightning's
+        constructor call drops: they are read from it (rheograph.graphs.targets.from_legacy)."""
+        hparams, graph = checkpoint.get("hyper_parameters") or {}, checkpoint.get("graph")
+        if is_legacy(hparams) and isinstance(graph, dict):
+            self.targets = from_legacy(graph, hparams)
+            graph_inputs = list(graph.get("graph_inputs", ()))
+            self.reference_columns = self.targets.columns(graph_inputs)
+            self.hparams.update(targets=self.targets.to_config(), graph_inputs=graph_inputs)
+
     def _corrected_targets(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """Transformed targets (G, 3) -> per stress and minus the computed inputs they correct."""
-        out = pressure_in_stress_units(y, stress) if self.hparams.pressure_per_stress else y.clone()
-        for target, column in self._corrected():
+        out = pressure_in_stress_units(y, stress) if self.targets.pi.per_stress else y.clone()
+        for target, column in self.reference_columns:
             out[:, target] = out[:, target] - u[:, column].to(out.dtype)
         return out
 
@@ -437,15 +461,6 @@ class SurrogateModule(L.LightningModule):
         out = self._corrected_targets(y, stress, u)
         mean = self._state_mean(phi, stress) if phi is not None else None
         return out if mean is None else out - mean.to(out.dtype)
-
-    def _corrected(self) -> list[tuple[int, int]]:
-        """(target, graph-input column) pairs whose target is learned as a correction to the input."""
-        pairs = [
-            (0, self.hparams.viscosity_input),
-            (1, self.hparams.get("pressure_input", -1)),  # bundles of older versions have none
-            (2, self.hparams.z_mu_input),
-        ]
-        return [(target, column) for target, column in pairs if column >= 0]
 
     def fit_target_scaling(
         self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor, phi=None, jammed=None
@@ -475,14 +490,14 @@ class SurrogateModule(L.LightningModule):
         mean = self._state_mean(batch.phi.view(-1), batch.stress.view(-1))
         if mean is not None:
             learned = learned + mean.to(learned.dtype)
-        corrected = self._corrected()
+        corrected = self.reference_columns
         if corrected:
             learned = learned.clone()
         # the corrections are in the learned space (the spring pressure per stress): added before Pi
         # returns to sigma0
         for target, column in corrected:
             learned[:, target] = learned[:, target] + batch.u[:, column].to(learned.dtype)
-        if self.hparams.pressure_per_stress:
+        if self.targets.pi.per_stress:
             learned = pressure_in_sigma0(learned, batch.stress.view(-1))
         return learned
 
@@ -551,10 +566,8 @@ class SurrogateModule(L.LightningModule):
             both = torch.from_numpy(np.concatenate([pred, true], axis=1)).to(self.device)
             gathered = self.all_gather(both).reshape(-1, 6).cpu().numpy()
             pred, true = gathered[:, :3], gathered[:, 3:]
-        hp = self.hparams
         metrics = regression_metrics(
-            physical_targets(pred, hp.viscosity_scale, hp.pressure_scale),
-            physical_targets(true, hp.viscosity_scale, hp.pressure_scale),
+            physical_targets(pred, self.targets), physical_targets(true, self.targets)
         )
         self.log_dict(
             {f"{stage}/{k}": float(v) for k, v in metrics.items() if not k.startswith("n_")}, on_epoch=True

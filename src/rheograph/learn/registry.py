@@ -22,6 +22,7 @@ import shutil
 from pathlib import Path
 
 from rheograph.errors import InputError
+from rheograph.graphs.targets import spec_of_record
 from rheograph.io.json_files import read_json
 from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle
 
@@ -178,6 +179,7 @@ def _noise_text(card: dict) -> str:
 
 def card_markdown(card: dict) -> str:
     d = card["domain"]
+    targets = spec_of_record(card["graph"])  # cards of earlier versions: the legacy form
     computed = [x for x in card["graph"]["graph_inputs"] if x in COMPUTED_INPUTS]
     lines = [
         f"# Model card: {card['name']}",
@@ -207,13 +209,17 @@ def card_markdown(card: dict) -> str:
             + "."
             + "".join(
                 f" {target} is learned as a correction to {reference}."
-                for flag, target, reference in (
-                    ("viscosity_on_solve", "η_r", "the one-solve value"),
-                    ("viscosity_on_relaxed", "η_r", "the relaxed configuration's value"),
-                    ("pressure_on_spring", "Π", "the spring sum"),
-                    ("z_mu_on_count", "Z_μ", "the count"),
+                for spec_reference, target, reference in (
+                    (targets.eta_r.relative_to == "solve_viscosity", "η_r", "the one-solve value"),
+                    (
+                        targets.eta_r.relative_to == "relaxed_viscosity",
+                        "η_r",
+                        "the relaxed configuration's value",
+                    ),
+                    (targets.pi.relative_to == "spring_pressure", "Π", "the spring sum"),
+                    (targets.z_mu.relative_to == "frictional_coordination", "Z_μ", "the count"),
                 )
-                if card["graph"].get(flag)
+                if spec_reference
             )
         )
     graph = card["graph"]
@@ -241,10 +247,10 @@ def card_markdown(card: dict) -> str:
             + (
                 " (for η_r, learned as a correction to the one-solve value: that value times the mean "
                 "correction at (φ, σ))."
-                if card["graph"].get("viscosity_on_solve")
+                if targets.eta_r.relative_to == "solve_viscosity"
                 else " (for η_r, learned as a correction to the relaxed configuration's value: that "
                 "value times the mean correction at (φ, σ))."
-                if card["graph"].get("viscosity_on_relaxed")
+                if targets.eta_r.relative_to == "relaxed_viscosity"
                 else "."
             )
         )

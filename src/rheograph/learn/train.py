@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from rheograph.errors import InputError, OtherRunError
 from rheograph.graphs.dataset import GraphSettings
+from rheograph.graphs.targets import TargetSpec
 from rheograph.io.snapshots import data_fingerprint
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.bundle import predict_dataset, save_bundle
@@ -75,6 +76,7 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
     values["edge_features"] = tuple(values["edge_features"])
     values["graph_inputs"] = tuple(values.get("graph_inputs", ()))
     values["noise_range"] = tuple(values.get("noise_range", ()))
+    values["targets"] = TargetSpec.from_config(values.get("targets"))
     return GraphSettings(**values)
 
 
@@ -87,21 +89,9 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
         cfg.model,
         edge_in=len(settings.edge_features),
         global_in=len(settings.graph_inputs),
-        viscosity_scale=settings.viscosity_scale,
-        pressure_scale=settings.pressure_scale,
-        pressure_per_stress=settings.pressure_per_stress,
+        targets=settings.targets.to_config(),
+        graph_inputs=list(settings.graph_inputs),
         state_mean_by_stress=settings.stress_known,
-        z_mu_input=(settings.graph_inputs.index("frictional_coordination") if settings.z_mu_on_count else -1),
-        viscosity_input=(
-            settings.graph_inputs.index("solve_viscosity")
-            if settings.viscosity_on_solve
-            else settings.graph_inputs.index("relaxed_viscosity")
-            if settings.viscosity_on_relaxed
-            else -1
-        ),
-        pressure_input=(
-            settings.graph_inputs.index("spring_pressure") if settings.pressure_on_spring else -1
-        ),
         _convert_="all",
     )
     train = torch.as_tensor(dm.train_idx)
@@ -197,8 +187,7 @@ def train_fold(
     baselines = baseline_predictions(
         dataset_arrays(dm.dataset, fitted),
         dataset_arrays(dm.dataset, dm.test_idx),
-        settings.viscosity_scale,
-        settings.pressure_scale,
+        settings.targets,
     )
     prediction = dict(fold=k, pred=pred, true=true, baselines=baselines, **meta)
     save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
@@ -404,6 +393,7 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
 NEUTRAL_LATER_OPTIONS = (
     ("data", "train_fraction", 1.0),
     ("model", "global_mixing", "none"),
+    # the target specification enters in the form of earlier versions (config_fingerprint)
     ("graph", "z_mu_on_count", False),
     ("graph", "viscosity_on_solve", False),
     ("graph", "viscosity_on_relaxed", False),
@@ -423,6 +413,11 @@ def config_fingerprint(cfg: DictConfig) -> str:
     keep = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in skip}
     # how batches are assembled, not which: the device-resident batches equal the per-batch loader's
     keep.get("data", {}).pop("device_resident", None)
+    # the target specification in the form of earlier versions (graph.* booleans and scales), in which
+    # runs trained before it have their fingerprint
+    graph = keep.get("graph", {})
+    if "targets" in graph:
+        graph.update(TargetSpec.from_config(graph.pop("targets")).legacy_options())
     # options added later, at the value that reproduces what came before them: left out, so that runs
     # trained before the option existed stay valid (resumable, reportable)
     for group, key, neutral in NEUTRAL_LATER_OPTIONS:

@@ -55,6 +55,8 @@ def suggest(trial: optuna.Trial, name: str, spec: dict):
 
 
 def _override(name: str, value) -> str:
+    if value is None:
+        return f"{name}=null"
     if isinstance(value, list):
         return f"{name}=[{','.join(str(v) for v in value)}]"
     if isinstance(value, str):
