@@ -320,3 +320,29 @@ def test_a_3d_dataset_builds_and_records_its_dimension(dense_3d, tmp_path):
     dataset = SnapshotGraphDataset([dense_3d], settings, tmp_path)
     assert len(dataset) == 2 and dataset[0].pos.shape == (50, 3)
     assert suspension_record([dense_3d])["dim"] == 3
+
+
+@pytest.mark.slow
+def test_train_py_trains_a_3d_model_that_predicts_3d_snapshots(tmp_path):
+    """train.py on three tiny 3D runs (fold 0, 2 epochs): its bundle records dim 3, and the model
+    predicts a 3D trajectory (about 45 s)."""
+    import torch
+    from conftest import train_tiny_fold
+
+    import rheograph
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for seed, stress in enumerate((5.0, 10.0, 20.0), start=1):
+        params = SimParams3D(**{**DENSE_3D, "stress": stress, "snapshot_interval": 0.02, "seed": seed})
+        assert run_state_point(params, data / f"s{stress:g}.h5", progress=False).status == "completed"
+    run = train_tiny_fold(
+        [data / "s5.h5"],
+        tmp_path,
+        "graph.edge_features=[gap,nxny,nyy_nzz,frictional]",
+        "graph.graph_inputs=[log_stress,solve_viscosity,frictional_coordination,spring_pressure]",
+    )
+    assert torch.load(run / "fold0.pt", weights_only=True)["domain"]["dim"] == 3
+    snaps = read_snapshots(data / "s10.h5")
+    table = rheograph.load_model(run).predict_snapshots(snaps)
+    assert np.isfinite(table["eta_pred"]).all() and len(table["eta_pred"]) == len(snaps) >= 5
