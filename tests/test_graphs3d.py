@@ -346,3 +346,25 @@ def test_train_py_trains_a_3d_model_that_predicts_3d_snapshots(tmp_path):
     snaps = read_snapshots(data / "s10.h5")
     table = rheograph.load_model(run).predict_snapshots(snaps)
     assert np.isfinite(table["eta_pred"]).all() and len(table["eta_pred"]) == len(snaps) >= 5
+
+
+def test_solve_configuration_restarts_each_pass_from_the_snapshot(snaps):
+    """Each pass of the one-solve starts again from the snapshot, only the dt its implicit springs assume
+    carried over: two passes are one step of a fresh simulation told that dt."""
+    params = SimParams3D(**DENSE_3D)
+
+    def fresh(dt_assumed=0.0):
+        state = SimState3D(
+            positions=snaps.positions[1].copy(), radii=snaps.radii, lx=snaps.lx, ly=snaps.ly, lz=snaps.lz,
+            le_offset=float(snaps.le_offset[1]), dt_assumed=dt_assumed,
+        )  # fmt: skip
+        return Simulation3D(params, state)
+
+    first = fresh()
+    first.step()
+    two = fresh()
+    result = two.solve_configuration(passes=2)
+    assert two.state.steps == 1
+    assert result.shear_rate == fresh(first.state.dt_assumed).step().shear_rate
+    with pytest.raises(ValueError, match="fresh simulation"):
+        two.solve_configuration()
