@@ -245,15 +245,26 @@ def test_a_3d_file_handed_to_predict_is_refused_in_one_line(trajectory_3d, tmp_p
     assert done.returncode != 0
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in done.stderr
-    assert lines[0].startswith(f"predict.py: error: {trajectory_3d}: 3D snapshots: no 3D model yet")
+    assert lines[0].startswith(
+        f"predict.py: error: {trajectory_3d}: 3D snapshots, but model N400_phi0.76 is a 2D model"
+    )
     assert not out.exists()
 
 
-def test_the_graph_builder_refuses_3d_snapshots(trajectory_3d):
-    from rheograph.graphs.dataset import snapshot_graphs
+def test_a_3d_model_refuses_a_2d_snapshot_in_one_line(trajectory_3d):
+    """A model's bundle records the dimension of its training snapshots (absent in bundles made before
+    3D: 2D); a 3D model refuses 2D snapshots, as a 2D model refuses 3D ones."""
+    import dataclasses
 
-    with pytest.raises(InputError, match="3D snapshots: no 3D model yet"):
-        snapshot_graphs(read_snapshots(trajectory_3d), settings=None, run_id=0)
+    import rheograph
+
+    model = rheograph.load_model("N400_phi0.76")
+    model.domain = {**model.domain, "dim": 3}
+    snaps = read_snapshots(trajectory_3d)
+    flat = dataclasses.replace(snaps, positions=snaps.positions[:, :, :2], lz=None)
+    with pytest.raises(InputError, match=r"2D snapshots, but model N400_phi0.76 is a 3D model") as info:
+        model.predict_snapshots(flat)
+    assert "\n" not in str(info.value)
 
 
 def test_flow_curves_never_pool_2d_and_3d_runs(trajectory_3d, tmp_path):

@@ -36,8 +36,15 @@ from rheograph.graphs.features import (
     snapshot_edges,
     solve_viscosity,
 )
+from rheograph.graphs.features3d import (
+    EDGE_FEATURES_3D_ONLY,
+    check_separations3d,
+    relax_positions3d,
+    snapshot_edges3d,
+    solve_viscosity3d,
+)
 from rheograph.graphs.targets import TargetSpec
-from rheograph.io.configurations import Snapshots, refuse_3d, wrap_into_box
+from rheograph.io.configurations import Snapshots, wrap_into_box, wrap_into_box3d
 from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.io.snapshots import read_snapshots
 from rheograph.resources import check_memory, graph_bytes
@@ -88,11 +95,11 @@ class GraphSettings:
         object.__setattr__(self, "targets", TargetSpec.from_config(self.targets))
         if not 0.0 < self.cutoff <= 5.0:
             raise InputError(f"graph.cutoff={self.cutoff} is invalid: allowed 0 < cutoff <= 5 (units of a)")
-        unknown = set(self.edge_features) - set(EDGE_FEATURES)
+        unknown = set(self.edge_features) - set(EDGE_FEATURES) - set(EDGE_FEATURES_3D_ONLY)
         if unknown or not self.edge_features:
             raise InputError(
                 f"graph.edge_features={list(self.edge_features)}: allowed a non-empty subset "
-                f"of {list(EDGE_FEATURES)}"
+                f"of {list(EDGE_FEATURES)} (3D snapshots also {list(EDGE_FEATURES_3D_ONLY)})"
             )
         unknown = set(self.graph_inputs) - set(GRAPH_INPUTS)
         if unknown:
@@ -197,8 +204,13 @@ def snapshot_graphs(
     graphs of its simulation are built). ``workers`` > 1: the snapshots (their one solve, relaxation and
     edges) are split between that many processes; the graphs are the same."""
     snaps = source if isinstance(source, Snapshots) else read_snapshots(source)
-    refuse_3d(snaps)
     path = snaps.source
+    three_d = snaps.dim == 3
+    only_3d = [name for name in settings.edge_features if name in EDGE_FEATURES_3D_ONLY]
+    if only_3d and not three_d:
+        raise InputError(
+            f"{path}: a 2D snapshot, and graph.edge_features has the 3D-only feature(s) {only_3d}"
+        )
     params = snaps.graph_params()
     needed = [
         k
@@ -251,14 +263,18 @@ def snapshot_graphs(
             )
         contacts = [snaps.contacts[k] for k in keep]
     lx, ly, radii = snaps.lx, snaps.ly, snaps.radii
-    check_edge_reach(lx, ly, radii, settings.cutoff, path)
+    # the box's edges: (lx, ly) in 2D, (lx, ly, lz) in 3D
+    edges = (lx, ly, snaps.lz) if three_d else (lx, ly)
+    check_edge_reach(lx, ly, radii, settings.cutoff, path, lz=snaps.lz)
     solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
     # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
     for idx in keep:
-        check_separations(
-            f"{path}, snapshot {idx}", snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx]
-        )
+        where = f"{path}, snapshot {idx}"
+        if three_d:
+            check_separations3d(where, snaps.positions[idx], radii, (*edges, snaps.le_offset[idx]))
+        else:
+            check_separations(where, snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx])
     if settings.relax_strain and "disp_max" not in solve_params:
         raise InputError(
             f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "
@@ -276,7 +292,7 @@ def snapshot_graphs(
         }
         for k, idx in enumerate(keep)
     ]
-    shared = (radii, lx, ly, solve_params, settings, snaps.phi, run_id)
+    shared = (radii, edges, solve_params, settings, snaps.phi, run_id)
     workers = min(int(workers), len(jobs))
     if workers <= 1:
         return _graphs_of_snapshots(shared, jobs)
@@ -319,16 +335,23 @@ def _graph_arrays_of_snapshots(shared: tuple, jobs: list[dict]) -> list[dict]:
 
 def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
     """The graphs of ``jobs`` (one snapshot's positions, offset, noise, contacts, targets, ... each) of
-    one source whose ``shared`` values are (radii, lx, ly, solve parameters, settings, phi, run_id):
-    relaxed first where ``settings.relax_strain``, then its one solve, edges and inputs."""
-    radii, lx, ly, solve_params, settings, phi, run_id = shared
+    one source whose ``shared`` values are (radii, the box's edges (lx, ly) or (lx, ly, lz), solve
+    parameters, settings, phi, run_id): relaxed first where ``settings.relax_strain``, then its one
+    solve, edges and inputs."""
+    radii, edges, solve_params, settings, phi, run_id = shared
     graphs = []
     for job in jobs:
         positions, offset = job["positions"], job["le_offset"]
         # the strain the snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
         # that arrested within the step budget, which predictions flag
         relaxed, relaxation = np.nan, None
-        if settings.relax_strain:
+        if settings.relax_strain and len(edges) == 3:
+            relaxation = relax_positions3d(
+                positions.copy(), radii, (*edges, offset), solve_params, settings.relax_strain
+            )
+            positions, offset, relaxed = relaxation[:3]
+        elif settings.relax_strain:
+            lx, ly = edges
             relaxation = relax_positions(
                 positions.copy(), radii, lx, ly, offset, solve_params, settings.relax_strain
             )
@@ -337,7 +360,7 @@ def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
             snapshot_graph(
                 positions,
                 radii,
-                (lx, ly, offset),
+                (*edges, offset),
                 solve_params,
                 settings,
                 {"phi": phi, "position_noise": job["position_noise"]},
@@ -368,24 +391,31 @@ def snapshot_graph(
     relaxed_strain: float = np.nan,
     relaxation=None,
 ) -> Data:
-    """The graph of one snapshot: positions (N, 2) [a], radii (N,) [a], box = (lx, ly, le_offset) [a];
+    """The graph of one snapshot: positions (N, 2) [a], radii (N,) [a], box = (lx, ly, le_offset) [a]
+    (a 3D snapshot: positions (N, 3), box = (lx, ly, lz, le_offset), ``rheograph.graphs.features3d``);
     ``params`` the run's parameter mapping (imposed ``stress`` included; with ``disp_max`` the one-solve
     is computed, else its input and physics row are NaN), ``conditions`` the snapshot's known ``phi``
     and ``position_noise`` [a], ``targets`` (eta_r, Pi [sigma0], Z_mu) (NaN where unknown),
     ``relaxation`` the ``rheograph.graphs.features.Relaxation`` that produced ``positions`` (its
     observables are the RELAXED_GRAPH_INPUTS)."""
-    lx, ly, le_offset = box
     stress = float(params["stress"])
     # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
     solvable = "disp_max" in params and np.isfinite(stress)
-    eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if solvable else np.nan
+    if len(box) == 4:  # 3D: the box's volume takes the place of the area
+        size = box[0] * box[1] * box[2]
+        eta = solve_viscosity3d(positions, radii, box, params) if solvable else np.nan
+        edge_index, feats, pairs = snapshot_edges3d(positions, radii, box, settings.cutoff, params, contacts)
+    else:
+        lx, ly, le_offset = box
+        size = lx * ly
+        eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if solvable else np.nan
+        edge_index, feats, pairs = snapshot_edges(
+            positions, radii, lx, ly, le_offset, settings.cutoff, params, contacts
+        )
     known = {"log_stress": np.log(stress), **conditions}
     known["solve_viscosity"] = float(forward_transform(eta, settings.targets.viscosity_scale))
-    edge_index, feats, pairs = snapshot_edges(
-        positions, radii, lx, ly, le_offset, settings.cutoff, params, contacts
-    )
     known["frictional_coordination"] = 2.0 * feats["frictional"][: pairs["i"].size].sum() / radii.size
-    descriptors = snapshot_descriptors(pairs, radii.size, lx * ly)
+    descriptors = snapshot_descriptors(pairs, radii.size, size)
     # the physics-only estimates (rheograph.learn.baselines.physics_rows): the one-solve eta_r, the
     # contact-spring pressure (2 pi sigma / A) sum r a_bar overlap [sigma0] (overlap in delta_sigma),
     # and the counted frictional contacts
@@ -418,13 +448,13 @@ def snapshot_graph(
     return Data(
         x=torch.from_numpy(node_features(radii, params["size_ratio"])),
         pos=torch.from_numpy(np.asarray(positions, dtype=np.float64)),
-        box=torch.tensor([[lx, ly, le_offset]], dtype=torch.float64),
+        box=torch.tensor([list(box)], dtype=torch.float64),
         edge_index=torch.from_numpy(edge_index).long(),
         edge_attr=torch.from_numpy(edge_attr).float(),
         y=torch.from_numpy(y).float().view(1, 3),
         y_raw=torch.from_numpy(raw).double().view(1, 3),
         u=u,
-        area=torch.tensor([lx * ly], dtype=torch.float32),
+        area=torch.tensor([size], dtype=torch.float32),
         descriptors=torch.from_numpy(descriptors).view(1, -1),
         physics=torch.tensor([physics], dtype=torch.float64),
         n_particles=torch.tensor([radii.size]),
@@ -442,9 +472,11 @@ def noisy_copy(snaps: Snapshots, noise_range, seed) -> Snapshots:
     drawn per snapshot (``position_noise`` then holds the (S,) draws); ``seed`` seeds the draws."""
     rng = np.random.default_rng(seed)
     eps = np.exp(rng.uniform(*np.log(np.asarray(noise_range, dtype=np.float64)), len(snaps)))
+    box = (snaps.lx, snaps.ly) if snaps.lz is None else (snaps.lx, snaps.ly, snaps.lz)
+    wrap = wrap_into_box if snaps.lz is None else wrap_into_box3d
     positions = np.stack(
         [
-            wrap_into_box(p + rng.normal(0.0, e, p.shape), snaps.lx, snaps.ly, o)
+            wrap(p + rng.normal(0.0, e, p.shape), *box, o)
             for p, e, o in zip(snaps.positions, eps, snaps.le_offset)
         ]
     )
@@ -482,13 +514,15 @@ class NoisyGraphs(torch.utils.data.Dataset):
         params = self.run_params[int(g.run_id)]
         radii = np.where(g.x[:, 1].numpy() > 0.5, float(params["size_ratio"]), 1.0)
         pos = g.pos.numpy().astype(np.float64)
-        lx, ly, le_offset = (float(v) for v in g.box[0])
+        box = tuple(float(v) for v in g.box[0])  # (lx, ly, le_offset), 3D (lx, ly, lz, le_offset)
+        noisy = pos + rng.normal(0.0, eps, pos.shape)
+        wrapped = wrap_into_box3d(noisy, *box) if len(box) == 4 else wrap_into_box(noisy, *box)
         inputs = self.settings.graph_inputs
         source_noise = float(g.u[0, inputs.index("position_noise")]) if "position_noise" in inputs else 0.0
         return snapshot_graph(
-            wrap_into_box(pos + rng.normal(0.0, eps, pos.shape), lx, ly, le_offset),
+            wrapped,
             radii,
-            (lx, ly, le_offset),
+            box,
             {**params, "stress": float(g.stress)},
             self.settings,
             {"phi": float(g.phi), "position_noise": float(np.hypot(eps, source_noise))},
@@ -499,14 +533,18 @@ class NoisyGraphs(torch.utils.data.Dataset):
         )
 
 
-def check_edge_reach(lx: float, ly: float, radii: np.ndarray, cutoff: float, where) -> None:
+def check_edge_reach(
+    lx: float, ly: float, radii: np.ndarray, cutoff: float, where, lz: float | None = None
+) -> None:
     """Edges join pairs within ``cutoff`` (surface gap, units of a): the longest, two of the largest
-    particles, must be shorter than half the box (lx x ly [a]), or minimum images stop being unique and
-    edges are lost silently.  Refused by name for the file ``where``."""
+    particles, must be shorter than half the box (lx x ly [a], x lz in 3D), or minimum images stop being
+    unique and edges are lost silently.  Refused by name for the file ``where``."""
     reach = 2.0 * float(np.max(radii)) + cutoff
-    if min(lx, ly) <= 2.0 * reach:
+    sides = (lx, ly) if lz is None else (lx, ly, lz)
+    if min(sides) <= 2.0 * reach:
+        box = " x ".join(f"{side:.3g}" for side in sides)
         raise InputError(
-            f"graph.cutoff={cutoff} is too large for {where}: its box ({lx:.3g} x {ly:.3g} a) must "
+            f"graph.cutoff={cutoff} is too large for {where}: its box ({box} a) must "
             f"exceed twice the longest edge ({reach:.3g} a)"
         )
 

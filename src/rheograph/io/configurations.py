@@ -102,24 +102,23 @@ def wrap_into_box(positions: np.ndarray, lx: float, ly: float, le_offset: float)
     return out
 
 
-def refuse_3d(snaps: Snapshots) -> None:
-    """Raises ``InputError`` for 3D snapshots: the graph builder and every surrogate are 2D."""
-    if snaps.dim != 2:
-        raise InputError(
-            f"{snaps.source}: 3D snapshots: no 3D model yet (graphs and surrogates are 2D; the file's "
-            "time series and snapshots are read with rheograph.read_snapshots / rheograph.io.hdf5)"
-        )
+def wrap_into_box3d(positions: np.ndarray, lx: float, ly: float, lz: float, le_offset: float) -> np.ndarray:
+    """Positions (N, 3) [a], anywhere, mapped into the 3D box [-Lx/2, Lx/2) x [-Ly/2, Ly/2) x [-Lz/2,
+    Lz/2): x and y as ``wrap_into_box`` (flow x, gradient y, the Lees–Edwards images across y), z
+    (vorticity) plainly periodic."""
+    out = np.array(positions, dtype=np.float64)
+    out[:, :2] = wrap_into_box(out[:, :2], lx, ly, le_offset)
+    out[:, 2] -= lz * np.floor(out[:, 2] / lz + 0.5)
+    return out
 
 
 def noisy_positions(snaps: Snapshots, k: int, eps: float, rng: np.random.Generator) -> np.ndarray:
-    """Snapshot ``k``'s positions (N, 2) [a] plus Gaussian noise of ``eps`` [a] per coordinate drawn from
-    ``rng``, wrapped into the box (an imaging-grade copy of it)."""
-    return wrap_into_box(
-        snaps.positions[k] + rng.normal(0.0, eps, snaps.positions[k].shape),
-        snaps.lx,
-        snaps.ly,
-        snaps.le_offset[k],
-    )
+    """Snapshot ``k``'s positions (N, 2) [a] ((N, 3) in 3D) plus Gaussian noise of ``eps`` [a] per
+    coordinate drawn from ``rng``, wrapped into the box (an imaging-grade copy of it)."""
+    noisy = snaps.positions[k] + rng.normal(0.0, eps, snaps.positions[k].shape)
+    if snaps.lz is not None:
+        return wrap_into_box3d(noisy, snaps.lx, snaps.ly, snaps.lz, snaps.le_offset[k])
+    return wrap_into_box(noisy, snaps.lx, snaps.ly, snaps.le_offset[k])
 
 
 def area_fraction(radii, lx: float, ly: float) -> float:

@@ -1,5 +1,10 @@
 """Reading the output of LF_DEM (github.com/ryseto/LF_DEM), the C++ LF-DEM code of the seed paper, for
-a 2D stress-controlled Critical Load Model run (``LF_DEM -s <σ>cl conf params``).
+a 2D or 3D stress-controlled Critical Load Model run (``LF_DEM -s <σ>cl conf params``).
+
+A 3D run (header ``Ly`` > 0) is mapped onto rheograph's 3D axes: LF_DEM shears along x with the gradient
+along z and the vorticity along y, rheograph along x, y, z; (x, y, z) ours = (x, z, −y) of LF_DEM (a proper
+rotation), so the box is (Lx, Lz, Ly) of LF_DEM, the Lees–Edwards offset is its shear displacement, and Π
+its particle pressure (−tr σ / 3 in 3D, as rheograph's).
 
 What is read, and from where (docs/data_format.md, "LF_DEM runs"):
 
@@ -34,7 +39,14 @@ from pathlib import Path
 import numpy as np
 
 from rheograph.errors import InputError
-from rheograph.io.configurations import Snapshots, area_fraction, check_geometry, wrap_into_box
+from rheograph.io.configurations import (
+    Snapshots,
+    area_fraction,
+    check_geometry,
+    volume_fraction,
+    wrap_into_box,
+    wrap_into_box3d,
+)
 
 # LF_DEM's defaults (SimulationInit.cpp, setDefaultParameters) for the keys read here
 LFDEM_DEFAULTS = {
@@ -110,7 +122,7 @@ def _par_text(path: Path) -> str:
 
 def read_par(path: Path) -> tuple[dict, list[dict]]:
     """(file header, snapshots): each snapshot a dict of its header values and ``radii`` (N,),
-    ``positions`` (N, 2) in the x–z plane.
+    ``positions`` (N, 2) in the x–z plane and ``xyz`` (N, 3), the three coordinates in LF_DEM's axes.
 
     The last configuration is left out, with a warning, where it is unfinished: fewer particle rows than
     the header's np, or a last line without its line end (a run still writing, or a copy cut short — a
@@ -147,6 +159,7 @@ def read_par(path: Path) -> tuple[dict, list[dict]]:
             ) from exc
         current["radii"] = table[:, 1]
         current["positions"] = table[:, [2, 4]]
+        current["xyz"] = table[:, 2:5]
         snapshots.append(current)
 
     for line in lines:
@@ -203,9 +216,10 @@ def _parameters_from_input_record(path: Path) -> dict | None:
     return None
 
 
-def _exact_box(path: Path) -> tuple[float, float] | None:
-    """(Lx, Lz) to full precision from the initial configuration's header that LF_DEM copies into
-    ``input_<name>.dat`` (``# np1 np2 vf lx ly lz ...``); the par file's header has 6 digits only."""
+def _exact_box(path: Path) -> tuple[float, float, float] | None:
+    """(Lx, Ly, Lz) in LF_DEM's axes to full precision from the initial configuration's header that
+    LF_DEM copies into ``input_<name>.dat`` (``# np1 np2 vf lx ly lz ...``); the par file's header has 6
+    digits only."""
     record = _sibling(path, "input")
     if record is None:
         return None
@@ -216,7 +230,7 @@ def _exact_box(path: Path) -> tuple[float, float] | None:
         if line.startswith("#") and "lx" in keys and "lz" in keys:
             values = lines[k + 1][1:].split()
             if len(values) == len(keys):
-                return float(values[keys.index("lx")]), float(values[keys.index("lz")])
+                return tuple(float(values[keys.index(key)]) for key in ("lx", "ly", "lz"))
     return None
 
 
@@ -315,8 +329,10 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
     path = Path(path)
     where = str(path)
     header, blocks = read_par(path)
-    if header.get("flow_type", "shear") != "shear" or float(header.get("Ly", 0)) != 0:
-        raise InputError(f"{where}: not a 2D simple-shear LF_DEM run (flow_type {header.get('flow_type')})")
+    if header.get("flow_type", "shear") != "shear":
+        raise InputError(f"{where}: not a simple-shear LF_DEM run (flow_type {header.get('flow_type')})")
+    # a 3D run has a vorticity edge Ly; its axes map onto ours by (x, y, z) = (x, z, -y) of LF_DEM
+    three_d = float(header.get("Ly", 0)) != 0
     if header.get("units", "critical_load units") != "critical_load units":
         raise InputError(
             f"{where}: data in {header['units']}; rheograph reads critical-load units (LF_DEM -s <σ>cl)"
@@ -328,16 +344,19 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
         raise InputError(f"{where}: the target stress changes during the run ({sorted(stresses)})")
     stress = stresses.pop()
     lx, ly = float(header["Lx"]), float(header["Lz"])
+    lz = float(header["Ly"]) if three_d else None
     exact = _exact_box(path)
     if (
         exact is not None
         and math.isclose(exact[0], lx, rel_tol=1e-5)
-        and math.isclose(exact[1], ly, rel_tol=1e-5)
+        and math.isclose(exact[2], ly, rel_tol=1e-5)
+        and (lz is None or math.isclose(exact[1], lz, rel_tol=1e-5))
     ):
-        lx, ly = exact
+        lx, ly = exact[0], exact[2]
+        lz = exact[1] if three_d else None
     radii = blocks[0]["radii"]
-    phi = area_fraction(radii, lx, ly)
-    check_geometry(where, radii, lx, ly, float(header.get("VF", phi)))
+    phi = area_fraction(radii, lx, ly) if lz is None else volume_fraction(radii, lx, ly, lz)
+    check_geometry(where, radii, lx, ly, float(header.get("VF", phi)), lz)
 
     if lfdem_params is not None:
         try:
@@ -369,9 +388,17 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
     gap = np.abs((from_strain - printed + 0.5 * lx) % lx - 0.5 * lx)
     offsets = np.where(gap < 1e-3, from_strain, printed)
     offsets = offsets - lx * np.floor(offsets / lx + 0.5)
-    if not (np.isfinite(offsets).all() and all(np.isfinite(b["positions"]).all() for b in blocks)):
+    if not (np.isfinite(offsets).all() and all(np.isfinite(b["xyz"]).all() for b in blocks)):
         raise InputError(f"{where}: positions or shear displacements that are not finite numbers (nan, inf)")
-    positions = np.stack([wrap_into_box(b["positions"], lx, ly, o) for b, o in zip(blocks, offsets)])
+    if three_d:
+        positions = np.stack(
+            [
+                wrap_into_box3d(b["xyz"][:, [0, 2, 1]] * [1.0, 1.0, -1.0], lx, ly, lz, o)
+                for b, o in zip(blocks, offsets)
+            ]
+        )
+    else:
+        positions = np.stack([wrap_into_box(b["positions"], lx, ly, o) for b, o in zip(blocks, offsets)])
     shear_rate = np.array([float(b["shear_rate"]) for b in blocks])
     targets = np.full((len(blocks), 3), np.nan)
     if data is not None:
@@ -387,9 +414,10 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
     if int_file is not None:
         counts = _frictional_counts(int_file, len(blocks))
         targets[: len(counts), 2] = 2.0 * np.array(counts) / radii.size
+    coordinates = "xyz" if three_d else "positions"
     # RMS of rounding to 6 significant digits: uniform over +-0.5 unit of the last digit of each coordinate
     last_digit = 10.0 ** (
-        np.floor(np.log10(np.maximum(np.abs(np.stack([b["positions"] for b in blocks])), 1e-12))) - 5
+        np.floor(np.log10(np.maximum(np.abs(np.stack([b[coordinates] for b in blocks])), 1e-12))) - 5
     )
     rounding = float(np.sqrt(np.mean(last_digit**2) / 12.0))
     return Snapshots(
@@ -408,6 +436,7 @@ def read_lfdem(path: str | Path, lfdem_params: str | Path | None = None) -> Snap
         jammed=np.zeros(len(blocks), dtype=bool),
         numerics=numerics,
         position_noise=rounding,
+        lz=lz,
     )
 
 

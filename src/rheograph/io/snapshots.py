@@ -10,7 +10,9 @@ Three kinds of source (``read_snapshots`` tells them apart by their content and 
   ``positions`` (S, N, 2) or (N, 2) [a], ``radii`` (N,) [a], ``box`` (2,) = (Lx, Ly) [a], ``le_offset``
   (S,) or a scalar [a] (x-shift of the periodic image above, y + Ly), ``stress`` (σ/σ0), ``phi``, and the
   physical parameters ``PHYSICAL_PARAMS`` named as the ``sim.*`` keys; optional ``strain``, ``eta_r``,
-  ``pressure``, ``z_mu`` (S,), ``position_noise`` [a] and ``disp_max``;
+  ``pressure``, ``z_mu`` (S,), ``position_noise`` [a] and ``disp_max``.  A 3D one has positions
+  (S, N, 3) or (N, 3) (x flow, y gradient, z vorticity), ``box`` (3,) = (Lx, Ly, Lz) and ``phi`` the
+  volume fraction; its optional ``dim`` (2 or 3) must agree;
 * an **LF_DEM run**: its ``par_*.dat`` (plain or ``.gz``), see ``rheograph.io.lfdem``.
 
 Positions are wrapped into rheograph's box [-Lx/2, Lx/2) x [-Ly/2, Ly/2) with the Lees–Edwards images
@@ -41,6 +43,7 @@ from rheograph.io.configurations import (
     check_geometry,
     size_ratio,
     wrap_into_box,
+    wrap_into_box3d,
 )
 from rheograph.io.hdf5 import (
     SCHEMA_VERSION,
@@ -62,7 +65,7 @@ BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_ga
 # the step a source was made with, are recorded by write_bare beside disp_max
 BARE_KEYS = (
     "positions", "radii", "box", "le_offset", "stress", "phi", *PHYSICAL_PARAMS, "strain", *TARGET_KEYS,
-    "position_noise", "disp_max", "dt_max", "lagged_step_control",
+    "position_noise", "disp_max", "dt_max", "lagged_step_control", "dim",
 )  # fmt: skip
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
@@ -258,18 +261,25 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     if positions.ndim == 2:
         positions = positions[None]
     radii = _numbers(values, "radii", where).reshape(-1)
-    if positions.ndim != 3 or positions.shape[1:] != (radii.size, 2):
+    box = _numbers(values, "box", where).reshape(-1)
+    if box.size not in (2, 3):
+        raise InputError(f"{where}: box must be (Lx, Ly), or (Lx, Ly, Lz) in 3D, found {box.size} value(s)")
+    dim = box.size
+    if values.get("dim") is not None and _scalar(values, "dim", where) != dim:
         raise InputError(
-            f"{where}: positions must be (S, N, 2) or (N, 2) with N = {radii.size} (the radii), "
-            f"found {positions.shape}"
+            f"{where}: dim = {_scalar(values, 'dim', where):g} but the box has {dim} edges (2D: (Lx, Ly), "
+            "3D: (Lx, Ly, Lz))"
+        )
+    if positions.ndim != 3 or positions.shape[1:] != (radii.size, dim):
+        raise InputError(
+            f"{where}: positions must be (S, N, {dim}) or (N, {dim}) with N = {radii.size} (the radii) "
+            f"for a box of {dim} edges, found {positions.shape}"
         )
     if not np.all(np.isfinite(positions)):
         raise InputError(f"{where}: positions contain non-finite values")
     n_snap = positions.shape[0]
-    box = _numbers(values, "box", where).reshape(-1)
-    if box.size != 2:
-        raise InputError(f"{where}: box must be (Lx, Ly), found {box.size} value(s)")
     lx, ly = float(box[0]), float(box[1])
+    lz = float(box[2]) if dim == 3 else None
     offsets = _numbers(values, "le_offset", where).reshape(-1)
     if offsets.size == 1:
         offsets = np.full(n_snap, offsets[0])
@@ -279,7 +289,7 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     stress = _scalar(values, "stress", where) if values.get("stress") is not None else float("nan")
     if stress <= 0:
         raise InputError(f"{where}: stress = {stress:g} must be > 0 (σ/σ0)")
-    check_geometry(where, radii, lx, ly, phi)
+    check_geometry(where, radii, lx, ly, phi, lz)
     params = {key: _scalar(values, key, where) for key in PHYSICAL_PARAMS if key in values}
     measured_ratio = size_ratio(radii)
     if "size_ratio" in params and not math.isclose(params["size_ratio"], measured_ratio, rel_tol=1e-5):
@@ -310,7 +320,12 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     return Snapshots(
         source=where,
         kind=kind,
-        positions=np.stack([wrap_into_box(p, lx, ly, o) for p, o in zip(positions, offsets)]),
+        positions=np.stack(
+            [
+                wrap_into_box(p, lx, ly, o) if lz is None else wrap_into_box3d(p, lx, ly, lz, o)
+                for p, o in zip(positions, offsets)
+            ]
+        ),
         radii=radii,
         lx=lx,
         ly=ly,
@@ -323,6 +338,7 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         jammed=np.zeros(n_snap, dtype=bool),
         numerics=numerics,
         position_noise=noise,
+        lz=lz,
     )
 
 
@@ -331,7 +347,7 @@ def write_bare(path: str | Path, snapshots: Snapshots) -> None:
     values = {
         "positions": snapshots.positions,
         "radii": snapshots.radii,
-        "box": np.array([snapshots.lx, snapshots.ly]),
+        "box": np.array([snapshots.lx, snapshots.ly, *(() if snapshots.lz is None else (snapshots.lz,))]),
         "le_offset": snapshots.le_offset,
         "stress": snapshots.stress,
         "phi": snapshots.phi,

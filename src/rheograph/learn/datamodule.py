@@ -331,7 +331,8 @@ def thin_snapshots(idx: np.ndarray, runs: np.ndarray, fraction: float) -> np.nda
 
 def source_summary(path: str, lfdem_params=None) -> dict:
     """State point, N, physical parameters and simulation step of a snapshot source: ``phi``,
-    ``stress``, ``n_particles``, ``params`` (physical), ``numerics`` (rheograph.io.snapshots)."""
+    ``stress``, ``n_particles``, ``params`` (physical), ``numerics`` (rheograph.io.snapshots) and the
+    space dimension ``dim`` (2 or 3)."""
     from rheograph.io.configurations import PHYSICAL_PARAMS
     from rheograph.io.hdf5 import read_params
     from rheograph.io.snapshots import read_snapshots, source_kind
@@ -345,6 +346,7 @@ def source_summary(path: str, lfdem_params=None) -> dict:
                 "n_particles": int(stored["n_particles"]),
                 "params": {k: stored[k] for k in PHYSICAL_PARAMS if k in stored},
                 "numerics": {k: stored[k] for k in SOLVE_NUMERICS if k in stored},
+                "dim": int(stored.get("dim", 2)),
             }
         except (OSError, KeyError, ValueError, TypeError):
             pass  # held by a running simulation, or without readable root params: the reader says what
@@ -355,6 +357,7 @@ def source_summary(path: str, lfdem_params=None) -> dict:
         "n_particles": snaps.n_particles,
         "params": snaps.params,
         "numerics": snaps.numerics,
+        "dim": snaps.dim,
     }
 
 
@@ -371,14 +374,16 @@ def suspension_record(files, lfdem_params=None) -> dict:
     """What a model trained on ``files`` needs a snapshot to match, and how its one-solve input was
     computed: ``physical_params`` (PHYSICAL_PARAMS, one value each: files of different suspensions are
     refused, a model has no input for them) and ``solve_numerics``, per area fraction and N the step
-    (``disp_max``, ``dt_max``, ``lagged_step_control``) the one-solve input of its graphs used."""
+    (``disp_max``, ``dt_max``, ``lagged_step_control``) the one-solve input of its graphs used, and the
+    space dimension ``dim`` of its snapshots (2 or 3; 2D and 3D files are refused together)."""
     from rheograph.io.configurations import PHYSICAL_PARAMS
     from rheograph.sim.params import SimParams
 
-    physical, numerics = {}, {}
+    physical, numerics, dims = {}, {}, set()
     defaults = SimParams.defaults()
     for path in files:
         summary = source_summary(path, lfdem_params)
+        dims.add(summary["dim"])
         for key in PHYSICAL_PARAMS:
             if key not in summary["params"]:
                 raise InputError(f"{path}: does not record the physical parameter {key}")
@@ -386,6 +391,10 @@ def suspension_record(files, lfdem_params=None) -> dict:
         step = {k: summary["numerics"].get(k, defaults[k]) for k in SOLVE_NUMERICS}
         key = (round(summary["phi"], 6), summary["n_particles"])
         numerics.setdefault(key, set()).add(tuple(step.items()))
+    if len(dims) > 1:
+        raise InputError(
+            "data.files mixes 2D and 3D snapshots: a model is 2D or 3D; train one model per dimension"
+        )
     mixed = {k: sorted(v) for k, v in physical.items() if len(v) > 1}
     if mixed:
         raise InputError(
@@ -400,7 +409,11 @@ def suspension_record(files, lfdem_params=None) -> dict:
                 f"{sorted(steps)}: their one-solve inputs would not be computed alike"
             )
         solve.append({"phi": phi, "n_particles": n, **dict(next(iter(steps)))})
-    return {"physical_params": {k: next(iter(v)) for k, v in physical.items()}, "solve_numerics": solve}
+    return {
+        "physical_params": {k: next(iter(v)) for k, v in physical.items()},
+        "solve_numerics": solve,
+        "dim": dims.pop() if dims else 2,
+    }
 
 
 def split_files(split: dict, root: str | Path = ".") -> list[str]:

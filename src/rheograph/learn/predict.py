@@ -52,7 +52,7 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
-from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots, refuse_3d
+from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values
 from rheograph.io.tables import write_table
 from rheograph.learn.bundle import load_bundle, predict_dataset
@@ -313,7 +313,12 @@ class Surrogate:
 
     def predict_snapshots(self, snaps: Snapshots, accept_mismatch: bool = False) -> dict:
         """One row per snapshot of ``snaps``: a dict of (S,) columns (module docstring)."""
-        refuse_3d(snaps)
+        model_dim = int(self.domain.get("dim", 2))  # bundles written before 3D models are 2D
+        if snaps.dim != model_dim:
+            raise InputError(
+                f"{snaps.source}: {snaps.dim}D snapshots, but model {self.label} is a {model_dim}D model "
+                f"(trained on {model_dim}D snapshots): use a {snaps.dim}D model"
+            )
         if round(snaps.params.get("size_ratio", 0.0), 6) not in self.domain["size_ratio"]:
             raise InputError(
                 f"{snaps.source}: size ratio {snaps.params.get('size_ratio')} but model {self.label} was "
@@ -439,7 +444,8 @@ class Surrogate:
     ) -> dict:
         """Predict for configurations given as arrays (units of the small radius a): ``positions`` (S, N, 2)
         or (N, 2), ``radii`` (N,), ``box`` = (Lx, Ly), ``le_offset`` (S,) or a number (x-shift of the
-        periodic image above), ``stress`` σ/σ0 (None: unknown, for a positions-only model), ``phi``, and
+        periodic image above), ``stress`` σ/σ0 (None: unknown, for a positions-only model), ``phi``
+        (a 3D model: positions (S, N, 3) or (N, 3), ``box`` = (Lx, Ly, Lz), ``phi`` the volume fraction), and
         the physical parameters as keyword arguments named as the ``sim.*`` keys (``mu``,
         ``kn_coefficient``, ``kt_ratio``, ``delta``,
         ``lub_max_gap``).  Optional: ``strain`` and the true ``eta_r``, ``pressure``, ``z_mu`` (S,) for the

@@ -8,6 +8,8 @@ centres at one z, box taller than the cut-off in z) takes the 2D simulator's ste
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import time as wallclock
 from collections import defaultdict
 from dataclasses import dataclass
@@ -281,6 +283,23 @@ class Simulation3D:
             s.dt_assumed if p.integrator == "implicit" else 0.0,
             self.indptr, self.pair_slot, self.diag_slot, self.indices.shape[0], UNIT_STRAIN_RATE,
         )  # fmt: skip
+
+    def solve_configuration(self, passes: int = 2) -> StepResult:
+        """The result of one stress-controlled step from the configuration this simulation was started
+        from, which must be fresh (no step taken): the resistance solve of a snapshot, whose tangential
+        springs start unstretched.  dt is set as a running simulation sets it: each of ``passes`` solves
+        starts again from the same configuration and assumes DT_GROWTH x the dt the previous one would
+        step with (the first, ``disp_max``), as the 2D one-solve does.  The state is left as after the
+        last pass's step; the neighbour list and the symbolic factorisation are made once."""
+        if self.state.steps:
+            raise ValueError("solve_configuration needs a fresh simulation (no step taken)")
+        start = copy.deepcopy(self.state)
+        for k in range(passes):
+            if k:
+                self.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=self.state.dt_assumed)
+                self.max_displacement = 0.0
+            result = self.step()
+        return result
 
     # ---- one time step -----------------------------------------------------------------------
     def step(self, record: bool = False) -> StepResult:

@@ -1,0 +1,211 @@
+"""Graph features of a 3D sheared-suspension snapshot (pure numpy; no torch here): the 3D analogues of
+``rheograph.graphs.features``, under the same names so that one ``GraphSettings`` reads both.
+
+Axes as in the 3D simulator (``rheograph.sim.geometry3d``): flow x, gradient y, vorticity z; the box is
+(lx, ly, lz) with the Lees–Edwards offset ``le_offset`` on the images across the y faces, and z plainly
+periodic.  Functions here take the box as one tuple ``box3 = (lx, ly, lz, le_offset)`` [a].
+
+Simple shear is not rotation invariant: the flow and gradient directions are physical, so a feature may
+depend on them; what the flow leaves invariant are the reflection z -> -z (across the flow–gradient
+plane), the point inversion r -> -r and translations, and every feature below is unchanged by them (a
+vector feature turns into that of the reversed edge under the inversion).  The features keep their 2D
+meaning:
+
+* ``gap``, ``distance``, ``contact``, ``overlap``, ``lubrication``, ``log_lubrication``, ``load``,
+  ``frictional``, ``tangential_stretch`` (|stretch|, a 3-vector), ``sliding``: scalars of the pair,
+  invariant under every rotation of the pair frame; as in 2D.
+* ``dx``, ``dy``: the pair vector's flow and gradient components r n_x, r n_y; ``cos`` = n_x (the
+  cosine of the angle to the flow direction) and ``sin`` = n_y (the gradient component, 2D's sine of the
+  angle to the flow direction within the shear plane).  The vorticity component n_z is left out on
+  purpose: its sign flips under the symmetry z -> -z; what it adds enters through ``nyy_nzz``.
+* ``nxny`` (the shear-stress projection of a pair stresslet), ``nxx_nyy`` (the first normal-stress
+  difference's), and the 3D-only ``nyy_nzz`` = n_y^2 - n_z^2 (the second normal-stress difference's);
+  ``contact_shear``, ``contact_normal``, ``lubrication_shear``, ``spring_shear``: the pair's stress
+  contributions, as in 2D (``spring_shear`` = kt_ratio a_bar r sym(n (x) stretch)_xy / delta_sigma).
+
+Summed per volume instead of per area, the contact and spring sums are the stress in units of sigma:
+the contact-spring pressure -tr(sigma)/3 is (2 pi sigma / V) sum overlap a_bar r, the 2D expression with
+the volume for the area (``snapshot_descriptors``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rheograph.errors import InputError
+from rheograph.graphs.features import RELAX_MAX_STEPS, Relaxation, _viscosity, overlap_unit
+from rheograph.sim.contacts import SLIDE
+from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry
+from rheograph.sim.integrator3d import SimState3D, Simulation3D
+from rheograph.sim.params3d import SimParams3D
+from rheograph.sim.stress3d import particle_pressure
+
+# edge features that only a 3D snapshot has (a 2D model cannot ask for them)
+EDGE_FEATURES_3D_ONLY = ("nyy_nzz",)
+
+
+def check_separations3d(where: str, positions, radii, box3) -> None:
+    """``rheograph.graphs.features.check_separations`` in 3D: refuses a configuration (positions (N, 3)
+    [a], wrapped) in which a particle's centre lies within another particle."""
+    lx, ly, lz, le_offset = box3
+    positions = np.ascontiguousarray(positions, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, 0.0)
+    _, distance, _, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
+    larger = np.maximum(radii[pair_i], radii[pair_j])
+    inside = np.flatnonzero(distance <= larger)
+    if inside.size:
+        k = inside[np.argmin(distance[inside] / larger[inside])]
+        i, j = int(pair_i[k]), int(pair_j[k])
+        raise InputError(
+            f"{where}: particles {i} and {j} (radii {radii[i]:g}, {radii[j]:g}) are {distance[k]:.3g} a "
+            f"apart, one centre within the other particle ({inside.size} such pair(s)): no contact model "
+            "describes that (the simulator's overlaps stay within 0.02 a); is a particle listed twice, or "
+            "are the positions in other units than the small radius a?"
+        )
+
+
+def snapshot_pairs3d(positions, radii, box3, cutoff, params) -> dict:
+    """Per-pair geometry of the P pairs i < j with surface gap < ``cutoff`` [a]: the keys of the 2D
+    ``snapshot_pairs`` (``i``, ``j``, ``xi``, ``r``, ``nx``, ``ny``, ``abar``, ``overlap``, ``lub_gap``)
+    and ``nz``."""
+    lx, ly, lz, le_offset = box3
+    positions = np.ascontiguousarray(positions, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, cutoff)
+    nvec, r, xi, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
+    keep = r - radii[pair_i] - radii[pair_j] < cutoff
+    pair_i, pair_j, nvec, r, xi = pair_i[keep], pair_j[keep], nvec[keep], r[keep], xi[keep]
+    abar = 0.5 * (radii[pair_i] + radii[pair_j])
+    return {
+        "i": pair_i,
+        "j": pair_j,
+        "xi": xi,
+        "r": r,
+        "nx": nvec[:, 0],
+        "ny": nvec[:, 1],
+        "nz": nvec[:, 2],
+        "abar": abar,
+        "overlap": np.maximum(-xi, 0.0) * abar / overlap_unit(float(params["kn_coefficient"])),
+        "lub_gap": np.maximum(xi, 0.0) + float(params["delta"]),
+    }
+
+
+def contact_history3d(pairs: dict, contacts, n_particles: int, kn_coefficient: float) -> dict:
+    """Per pair of ``pairs``: the tangential ``stretch`` (P, 3) [delta_sigma] and ``sliding`` (P,) from
+    the recorded ``contacts`` = (pairs (C, 2), states (C,), stretches (C, 3) [a]) of one snapshot, as the
+    2D ``contact_history``."""
+    recorded, states, stretches = contacts
+    recorded = np.asarray(recorded, dtype=np.int64).reshape(-1, 2)
+    stretches = np.asarray(stretches, dtype=np.float64).reshape(-1, 3)
+    key = np.minimum(recorded[:, 0], recorded[:, 1]) * n_particles + np.maximum(
+        recorded[:, 0], recorded[:, 1]
+    )
+    lookup = {int(k): c for c, k in enumerate(key)}
+    stretch = np.zeros((pairs["i"].size, 3))
+    sliding = np.zeros(pairs["i"].size, dtype=bool)
+    unit = overlap_unit(kn_coefficient)
+    for p, (i, j) in enumerate(zip(pairs["i"], pairs["j"])):
+        c = lookup.get(int(min(i, j)) * n_particles + int(max(i, j)))
+        if c is None:
+            continue
+        sign = -1.0 if (recorded[c, 0] > recorded[c, 1]) != (i > j) else 1.0
+        stretch[p] = sign * stretches[c] / unit
+        sliding[p] = states[c] == SLIDE
+    return {"stretch": stretch, "sliding": sliding}
+
+
+def snapshot_edges3d(positions, radii, box3, cutoff, params, contacts=None):
+    """Directed edges (2, 2P) and every edge feature (module docstring) of a 3D snapshot, as the 2D
+    ``snapshot_edges``: (edge_index, features dict of (2P,) arrays, the pair dict of
+    ``snapshot_pairs3d``); edge k and k + P are the two directions of one pair."""
+    p = snapshot_pairs3d(positions, radii, box3, cutoff, params)
+    xi, r, nx, ny, nz = p["xi"], p["r"], p["nx"], p["ny"], p["nz"]
+    overlap, lub_gap, abar = p["overlap"], p["lub_gap"], p["abar"]
+    delta = float(params["delta"])
+    load = np.arcsinh(float(params["stress"]) * abar * overlap)
+    pair_features = {
+        "gap": (xi, 1.0),
+        "distance": (r, 1.0),
+        "dx": (nx * r, -1.0),
+        "dy": (ny * r, -1.0),
+        "sin": (ny, -1.0),
+        "cos": (nx, -1.0),
+        "contact": ((xi < 0).astype(np.float64), 1.0),
+        "overlap": (overlap, 1.0),
+        "lubrication": (delta / lub_gap, 1.0),
+        "log_lubrication": (-np.log(lub_gap), 1.0),
+        "nxny": (nx * ny, 1.0),
+        "nxx_nyy": (nx * nx - ny * ny, 1.0),
+        "nyy_nzz": (ny * ny - nz * nz, 1.0),
+        "contact_shear": (overlap * abar * r * nx * ny, 1.0),
+        "contact_normal": (overlap * abar * r, 1.0),
+        "lubrication_shear": (abar * r * (nx * ny) ** 2 * delta / lub_gap, 1.0),
+        "load": (load, 1.0),
+        "frictional": ((load > np.arcsinh(1.0)).astype(np.float64), 1.0),
+    }
+    if contacts is not None:
+        history = contact_history3d(p, contacts, radii.size, float(params["kn_coefficient"]))
+        s = history["stretch"]
+        pair_features["tangential_stretch"] = (np.sqrt((s**2).sum(axis=1)), 1.0)
+        pair_features["sliding"] = (history["sliding"].astype(np.float64), 1.0)
+        shear = float(params["kt_ratio"]) * abar * r * 0.5 * (nx * s[:, 1] + ny * s[:, 0])
+        pair_features["spring_shear"] = (shear, 1.0)
+    edge_index = np.stack([np.r_[p["i"], p["j"]], np.r_[p["j"], p["i"]]])
+    feats = {name: np.r_[value, sign * value] for name, (value, sign) in pair_features.items()}
+    return edge_index, feats, p
+
+
+def _simulation(positions, radii, box3, params: dict) -> tuple[SimParams3D, Simulation3D]:
+    """A stress-controlled implicit ``Simulation3D`` started from one snapshot (no contact history)."""
+    lx, ly, lz, le_offset = box3
+    mapping = {k: v for k, v in params.items() if k != "dim"}
+    sim_params = SimParams3D.from_mapping({**mapping, "integrator": "implicit", "control": "stress"})
+    state = SimState3D(
+        positions=np.array(positions, dtype=np.float64),
+        radii=np.asarray(radii, dtype=np.float64),
+        lx=lx,
+        ly=ly,
+        lz=lz,
+        le_offset=le_offset,
+    )
+    return sim_params, Simulation3D(sim_params, state)
+
+
+def solve_viscosity3d(positions, radii, box3, params: dict, passes: int = 2) -> float:
+    """Relative viscosity eta_r of one stress-controlled resistance solve on a 3D snapshot: the 2D
+    ``solve_viscosity`` with the 3D simulator's step (``Simulation3D.solve_configuration``:
+    the tangential springs unstretched, dt assumed as a running simulation would after ``passes``)."""
+    sim_params, sim = _simulation(positions, radii, box3, params)
+    result = sim.solve_configuration(passes)
+    if result.shear_rate == 0.0:
+        raise InputError("solve_viscosity: the snapshot's resistance solve gives a zero shear rate")
+    return sim_params.stress / result.shear_rate
+
+
+def relax_positions3d(
+    positions, radii, box3, params: dict, strain: float = 0.01, max_steps: int | None = None
+) -> Relaxation:
+    """The 2D ``relax_positions`` with the 3D simulator: the snapshot sheared by ``strain`` at its
+    imposed stress; the returned ``positions`` are (N, 3) and ``pressure`` is -tr(sigma)/3."""
+    sim_params, sim = _simulation(positions, radii, box3, params)
+    viscosity_early = math.nan
+    for _ in range(RELAX_MAX_STEPS if max_steps is None else max_steps):
+        if sim.state.strain >= strain:
+            break
+        result = sim.step()
+        if math.isnan(viscosity_early) and sim.state.strain >= 0.25 * strain:
+            viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
+    relaxed = sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)
+    result = sim.step(record=True)
+    if math.isnan(viscosity_early):
+        viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
+    return Relaxation(
+        *relaxed,
+        viscosity=_viscosity(sim_params.stress, result.shear_rate),
+        pressure=particle_pressure(result.stress),
+        z_mu=2.0 * result.n_frictional / sim.state.radii.size,
+        viscosity_early=viscosity_early,
+    )
