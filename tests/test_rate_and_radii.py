@@ -14,7 +14,9 @@ import h5py
 import numpy as np
 import pytest
 
+from rheograph.errors import InputError
 from rheograph.io.hdf5 import read_params, read_run_info, read_timeseries
+from rheograph.io.snapshots import read_snapshots
 from rheograph.naming import run_name
 from rheograph.runner import run_state_point
 from rheograph.sim import SimParams, Simulation
@@ -129,6 +131,17 @@ def test_a_2d_run_on_polydisperse_radii_writes_them_with_the_box_of_phi(tmp_path
     np.testing.assert_array_equal(radii, params.particle_radii())
     assert math.pi * np.sum(radii**2) / (lx * ly) == pytest.approx(0.74, rel=1e-12)
     assert read_params(path)["polydispersity"] == 0.1
+    # its snapshots read back (the smallest drawn radius lies below the small species' nominal 1) ...
+    snaps = read_snapshots(path)
+    assert radii.min() < 1.0 and np.array_equal(snaps.radii, radii) and snaps.phi == 0.74
+    # ... while radii in other units are still refused, below the spread's band as above it
+    for factor in (0.7, 1.3):
+        with h5py.File(path, "r+") as h5:
+            h5["radii"][...] = radii * factor
+        with pytest.raises(
+            InputError, match=r"units of the small radius a \(smallest radius between 0.8 and 1,"
+        ):
+            read_snapshots(path)
 
 
 @pytest.mark.parametrize("suffix", [".txt", ".npy"])
@@ -145,6 +158,7 @@ def test_a_radii_file_round_trips(tmp_path, suffix):
         assert math.pi * np.sum(radii**2) / (h5.attrs["lx"] * h5.attrs["ly"]) == pytest.approx(0.74)
     path.unlink()  # a stored state point stays readable without its radii file
     assert params_from_mapping(read_params(out)) == params
+    np.testing.assert_array_equal(read_snapshots(out).radii, radii)  # its radii define a
 
 
 @pytest.mark.parametrize(

@@ -131,17 +131,24 @@ def volume_fraction(radii, lx: float, ly: float, lz: float) -> float:
         return float(4.0 * np.pi / 3.0 * np.sum(np.asarray(radii, dtype=np.float64) ** 3) / (lx * ly * lz))
 
 
-def check_geometry(where: str, radii, lx, ly, phi, lz: float | None = None) -> None:
+def check_geometry(where: str, radii, lx, ly, phi, lz: float | None = None, smallest=(1.0, 1.0)) -> None:
     """Radii in units of the small radius, a positive box, and the stated φ equal to the one the radii
-    and box give (to 1e-3: files round it); a volume fraction where the box has a third edge ``lz``."""
+    and box give (to 1e-3: files round it); a volume fraction where the box has a third edge ``lz``.
+
+    ``smallest``: the range the smallest radius must lie in — 1 for exactly sized species; for radii
+    spread about their species' nominal size (the small species' nominal radius being a) the band the
+    spread allows; None where the source defines a by its own radii (a simulation's radii file)."""
     radii = np.asarray(radii, dtype=np.float64)
     if radii.ndim != 1 or radii.size < 2 or not np.all(np.isfinite(radii)) or radii.min() <= 0:
         raise InputError(f"{where}: radii must be (N,) positive numbers, N >= 2")
-    if not math.isclose(float(radii.min()), 1.0, rel_tol=1e-6):
-        raise InputError(
-            f"{where}: lengths must be in units of the small radius a (smallest radius 1, found "
-            f"{radii.min():.6g}): divide positions, radii, box and le_offset by it"
-        )
+    if smallest is not None:
+        low, high = smallest
+        if not (low * (1 - 1e-6) <= float(radii.min()) <= high * (1 + 1e-6)):
+            expected = "1" if low == high else f"between {low:g} and {high:g}"
+            raise InputError(
+                f"{where}: lengths must be in units of the small radius a (smallest radius {expected}, "
+                f"found {radii.min():.6g}): divide positions, radii, box and le_offset by it"
+            )
     if not (math.isfinite(lx) and math.isfinite(ly) and lx > 0 and ly > 0):
         raise InputError(f"{where}: box must be two positive lengths (Lx, Ly) [a], found ({lx}, {ly})")
     if lz is None:

@@ -55,6 +55,7 @@ from rheograph.io.hdf5 import (
     readable_path,
 )
 from rheograph.io.lfdem import read_lfdem
+from rheograph.sim.radii import TRUNCATION as RADII_TRUNCATION
 
 log = logging.getLogger("rheograph")
 
@@ -82,6 +83,18 @@ def _open_trajectory(path: Path) -> tuple[h5py.File, Path]:
             f"{path}: cannot be opened as HDF5 ({exc}); if it is truncated or corrupt, move it aside and "
             "rerun that state point"
         ) from exc
+
+
+def smallest_radius_band(params: dict, where: str):
+    """What a trajectory's smallest radius may be (``check_geometry``'s ``smallest``), from the radii
+    its run drew: exactly 1 for two exact species; within the truncated spread below 1 for spread radii
+    (``sim.radii=polydisperse``: a is the small species' nominal radius); not checked for a run's radii
+    file, which defines a itself."""
+    kind = params.get("radii", "bidisperse")
+    if kind == "polydisperse":
+        spread = _scalar(params, "polydispersity", where)
+        return (1.0 - RADII_TRUNCATION * spread, 1.0)
+    return None if kind == "file" else (1.0, 1.0)
 
 
 def read_trajectory(path: str | Path) -> Snapshots:
@@ -152,7 +165,7 @@ def read_trajectory(path: str | Path) -> Snapshots:
                 for k in range(min(count, offset.size - 1))
             ]
     phi, stress = _scalar(params, "phi", str(path)), _scalar(params, "stress", str(path))
-    check_geometry(str(path), radii, lx, ly, phi, lz)
+    check_geometry(str(path), radii, lx, ly, phi, lz, smallest_radius_band(params, str(path)))
     check_configurations(str(path), positions, radii, offsets, strain, targets, dim)
     physical = {k: _scalar(params, k, f"{path}: params") for k in PHYSICAL_PARAMS if k in params}
     numerics = {k: params[k] for k in ("disp_max", "dt_max", "lagged_step_control") if k in params}
