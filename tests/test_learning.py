@@ -1213,7 +1213,7 @@ def test_the_composed_model_config_trains_with_partial_optimiser_and_schedule():
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=["model.optimizer.lr=1e-3", "trainer.max_epochs=12"])
-    module = instantiate(cfg.model, _convert_="all")
+    module = instantiate(cfg.model, net={"node_in": 2, "edge_in": 6}, _convert_="all")  # sizes: setup_fold
     assert (
         module.optimizer_factory.func is torch.optim.Adam and module.optimizer_factory.keywords["lr"] == 1e-3
     )
