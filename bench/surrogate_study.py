@@ -50,8 +50,13 @@ VARIANTS = {
         "graph.targets.eta_r.relative_to=null",
         "graph.targets.z_mu.relative_to=null",
     ],
-    "physics_mean_pool": ["graph=physics", "model=resgcn_physics", "model.pool=mean", "model.aggr=softmax"],
-    "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.norm=layer"],
+    "physics_mean_pool": [
+        "graph=physics",
+        "model=resgcn_physics",
+        "model.net.pool=mean",
+        "model.net.aggr=softmax",
+    ],
+    "physics_layer_norm": ["graph=physics", "model=resgcn_physics", "model.net.norm=layer"],
     "physics_pi_sigma0": [
         "graph=physics",
         "model=resgcn_physics",

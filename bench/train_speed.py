@@ -187,7 +187,7 @@ def levers(args) -> list[str]:
             )
             print(rows[-3:], flush=True)
         # normalisation layer: layer norm per node (DeeperGCN) instead of batch norm (the paper's)
-        _, layer_norm = setup_fold(config(args, n, 1, 32, ["model.norm=layer"]))
+        _, layer_norm = setup_fold(config(args, n, 1, 32, ["model.net.norm=layer"]))
         loader = DataLoader(train, batch_size=32, shuffle=True)
         seconds = epoch_seconds(layer_norm.net.train(), lambda loader=loader: loader, args.repeats)
         rows.append(
@@ -352,7 +352,7 @@ def pareto(args) -> list[dict]:
     for spec in args.models:
         variant, _, size = spec.partition(":")
         layers, width = (int(v) for v in size.split("x"))
-        extra = [*VARIANTS[variant], f"model.num_layers={layers}", f"model.hidden={width}"]
+        extra = [*VARIANTS[variant], f"model.net.num_layers={layers}", f"model.net.hidden={width}"]
         if variant == "paper":
             extra.append("model.scheduler=null")
         cfg = config(args, 400, args.epochs, None, extra)

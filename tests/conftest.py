@@ -116,3 +116,12 @@ def train_tiny_fold(tiny_files, tmp_path, *overrides):
         )
     train_folds(cfg, tmp_path / "run")
     return tmp_path / "run"
+
+
+def resgcn(edge_in: int = 6, global_in: int = 0, **options):
+    """``model.net`` as training completes it: the ResGCN partial with its input sizes filled in."""
+    from functools import partial
+
+    from rheograph.learn.model import ResGCN
+
+    return partial(ResGCN, node_in=2, edge_in=edge_in, global_in=global_in, **options)

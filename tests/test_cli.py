@@ -133,7 +133,9 @@ def test_every_shipped_fold_bundle_is_one_file_that_lightning_loads_too():
     bundle = torch.load(path, map_location="cpu", weights_only=True)
     module = SurrogateModule.load_from_checkpoint(path, map_location="cpu", weights_only=True)
     assert all(torch.equal(v, module.state_dict()[k]) for k, v in bundle["state_dict"].items())
-    assert module.hparams.hidden == bundle["hyper_parameters"]["hidden"]
+    # an earlier format (the network's options flat): rebuilt as its own network, not the defaults
+    assert module.hparams.net["kwargs"]["hidden"] == bundle["hyper_parameters"]["hidden"]
+    assert module.hparams.net["kwargs"]["edge_in"] == bundle["hyper_parameters"]["edge_in"] == 14
 
 
 def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whole(tmp_path, monkeypatch):
@@ -175,6 +177,7 @@ def test_the_top_level_names_are_listed_and_each_resolves_to_its_documented_obje
     interactive user sees none), and each resolves to the object the API reference documents."""
     import rheograph
     from rheograph.io.snapshots import read_snapshots
+    from rheograph.learn.nets import register_graph_network
     from rheograph.learn.networks import register_network
     from rheograph.learn.predict import load_model
     from rheograph.learn.registry import list_models
@@ -184,6 +187,7 @@ def test_the_top_level_names_are_listed_and_each_resolves_to_its_documented_obje
         "list_models": list_models,
         "load_model": load_model,
         "read_snapshots": read_snapshots,
+        "register_graph_network": register_graph_network,
         "register_network": register_network,
     }
     assert {name: getattr(rheograph, name) for name in rheograph.__all__} == documented

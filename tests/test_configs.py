@@ -83,7 +83,7 @@ def test_training_experiments_compose(name, tiny_files):
     from torch_geometric.data import Batch
 
     from rheograph.graphs.dataset import snapshot_graphs
-    from rheograph.learn.train import check_run_settings, folds_to_train, graph_settings
+    from rheograph.learn.train import check_run_settings, folds_to_train, graph_settings, input_sizes
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"experiment={name}"])
@@ -94,9 +94,7 @@ def test_training_experiments_compose(name, tiny_files):
         check_run_settings(cfg)
     assert folds_to_train(cfg)
     settings = graph_settings(cfg)
-    module = instantiate(
-        cfg.model, edge_in=len(settings.edge_features), global_in=len(settings.graph_inputs), _convert_="all"
-    )
+    module = instantiate(cfg.model, net=input_sizes(settings), _convert_="all")
     # the tiny runs end at strain 0.3, before the experiments' steady-state windows
     graphs = snapshot_graphs(tiny_files[1], dataclasses.replace(settings, min_strain=0.0), 0)[:2]
     with torch.no_grad():
@@ -185,22 +183,28 @@ def test_every_surrogate_study_variant_composes_valid_graph_settings():
 
 
 def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
-    """Runs trained before an option existed (data.train_fraction, model.global_mixing, the graph's
+    """Runs trained before an option existed (data.train_fraction, model.net.global_mixing, the graph's
     corrections) keep their fingerprint at its neutral value (they resume and report as before); any
     other value changes it — also the corrections' non-neutral default of graph=physics_solve.  The
     target specification enters in the form of earlier versions (graph booleans and scales): a config of
     that form fingerprints as the specification does."""
     from rheograph.graphs.targets import LEGACY_GRAPH_KEYS, TargetSpec
+    from rheograph.learn.module import LEGACY_NET_OPTIONS
     from rheograph.learn.train import NEUTRAL_LATER_OPTIONS, config_fingerprint
 
     options = [(g, k, v) for g, k, v in NEUTRAL_LATER_OPTIONS if k not in LEGACY_GRAPH_KEYS]
-    neutral = [f"{group}.{key}={str(value).lower()}" for group, key, value in options]
+    # the network's options live under model.net (the fingerprint reads them flat, as they were)
+    path = {(g, k): f"{g}.net" if g == "model" and k in LEGACY_NET_OPTIONS else g for g, k, _ in options}
+    neutral = [f"{path[group, key]}.{key}={str(value).lower()}" for group, key, value in options]
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=["~logger", *neutral, "graph=physics"])
     current = config_fingerprint(cfg)
     earlier = OmegaConf.to_container(cfg)
     for group, key, _ in options:
-        earlier[group].pop(key)
+        node = earlier[group]["net"] if path[group, key] != group else earlier[group]
+        node.pop(key)
+    net = earlier["model"].pop("net")  # the network's options flat, as before model.net
+    earlier["model"].update({k: v for k, v in net.items() if not k.startswith("_")})
     legacy = TargetSpec.from_config(earlier["graph"].pop("targets")).legacy_options()
     assert legacy["pressure_per_stress"] is True and not legacy["viscosity_on_solve"]
     later = {k for g, k, _ in NEUTRAL_LATER_OPTIONS if k in LEGACY_GRAPH_KEYS}
@@ -208,7 +212,7 @@ def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
     assert config_fingerprint(OmegaConf.create(earlier)) == current
     for override in (
         "data.train_fraction=0.5",
-        "model.global_mixing=virtual_node",
+        "model.net.global_mixing=virtual_node",
         "graph.targets.z_mu.relative_to=frictional_coordination",
         "graph.targets.eta_r.relative_to=solve_viscosity",
         "graph.targets.eta_r.relative_to=relaxed_viscosity",
@@ -230,12 +234,48 @@ def test_fingerprint_ignores_later_options_at_their_neutral_value_only():
         assert config_fingerprint(changed) != current, override
 
 
+@pytest.mark.parametrize("experiment", [None, "demo", "paper", "physics_solve_phi076_best"])
+def test_a_config_with_the_network_flat_fingerprints_as_its_nested_form(experiment):
+    """Runs trained before model.net held their network's options flat among the model's
+    (``model.hidden``, ...): the same settings in either form give one fingerprint, so those runs resume
+    and report; another network class (model.net._target_) or option gives another."""
+    from rheograph.learn.train import config_fingerprint
+
+    overrides = ["~logger"] + ([f"experiment={experiment}"] if experiment else [])
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=overrides)
+    nested = OmegaConf.to_container(cfg)
+    net = nested["model"].pop("net")
+    assert net.pop("_target_") == "rheograph.learn.model.ResGCN" and net.pop("_partial_") is True
+    flat = {**nested, "model": {**nested["model"], **net}}
+    assert "hidden" in flat["model"] and "net" not in flat["model"]
+    assert config_fingerprint(OmegaConf.create(flat)) == config_fingerprint(cfg)
+    other = OmegaConf.to_container(cfg)
+    other["model"]["net"]["_target_"] = "mypackage.MyNet"
+    assert config_fingerprint(OmegaConf.create(other)) != config_fingerprint(cfg)
+    other = OmegaConf.to_container(cfg)
+    other["model"]["net"]["hidden"] += 1
+    assert config_fingerprint(OmegaConf.create(other)) != config_fingerprint(cfg)
+
+
+def test_an_experiment_with_the_network_flat_is_refused_by_name():
+    """An experiment file written before model.net (``model: {hidden: 32}``) is refused in one line
+    naming the new key, before any work."""
+    from rheograph.learn.train import check_run_settings
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=["~logger", "+model.hidden=32"])
+    with pytest.raises(InputError, match=r"model.hidden is an option of the network: set model.net.hidden"):
+        check_run_settings(cfg)
+
+
 def test_every_graph_and_model_option_is_in_the_default_config():
     """`graph.X=...` and `model.X=...` work for every option of GraphSettings and SurrogateModule (a key
     missing from the default config would be refused as a misspelling)."""
     import inspect
 
     from rheograph.graphs.dataset import GraphSettings
+    from rheograph.learn.model import ResGCN
     from rheograph.learn.module import SurrogateModule
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
@@ -246,6 +286,9 @@ def test_every_graph_and_model_option_is_in_the_default_config():
     derived |= {"state_mean_by_stress"}
     options = set(inspect.signature(SurrogateModule.__init__).parameters) - derived
     assert options <= set(cfg.model), options - set(cfg.model)
+    # the network's own options, but for its output width and MLP depth (fixed: three targets)
+    net = set(inspect.signature(ResGCN.__init__).parameters) - derived - {"out_channels", "mlp_layers"}
+    assert net <= set(cfg.model.net), net - set(cfg.model.net)
 
 
 def test_the_configuration_reference_gives_every_key_a_meaning():

@@ -27,11 +27,11 @@ def test_ddp_two_processes_matches_one_process(tiny_files, tmp_path):
         "fold=0",
         "~logger",
         "report=false",
-        "model.dropout=0.0",
+        "model.net.dropout=0.0",
         # no batch normalisation: each DDP process would keep running statistics of its own half of the
         # batches, a difference of normalisation, not of the gradient exchange this test is about
-        "model.norm=layer",
-        "model.edge_readout=false",
+        "model.net.norm=layer",
+        "model.net.edge_readout=false",
         "trainer.enable_progress_bar=false",
         "data.batch_size=1000",  # the whole training fold (one process) or its half (each of two): one step
         "callbacks.early_stopping.patience=1000",

@@ -397,7 +397,7 @@ def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tm
         "graph.min_strain=0.05",
         "trainer.max_epochs=40",
         "trainer.enable_progress_bar=false",
-        "model.hidden=8",
+        "model.net.hidden=8",
         "~logger",
         "report=false",
         f"hydra.run.dir={run_dir}",
@@ -421,7 +421,7 @@ def test_train_killed_with_sigkill_resumes_keeping_finished_folds(tiny_files, tm
 
 @pytest.mark.slow  # 7 s; test_tune_with_bad_fixed_overrides_stops_before_the_first_trial covers the same path
 def test_tune_with_a_bad_fixed_model_option_stops_before_the_first_trial(tmp_path, tiny_files):
-    overrides = [*tiny_training_overrides(tiny_files, tmp_path), "model.aggr=sum"]
+    overrides = [*tiny_training_overrides(tiny_files, tmp_path), "model.net.aggr=sum"]
     code, out = run(
         [
             str(ROOT / "tune.py"),
@@ -432,7 +432,7 @@ def test_tune_with_a_bad_fixed_model_option_stops_before_the_first_trial(tmp_pat
         ],
         tmp_path,
     )
-    assert_one_line_error(code, out, "tune.py: error:", "model.aggr='sum' is invalid")
+    assert_one_line_error(code, out, "tune.py: error:", "model.net.aggr='sum' is invalid")
 
 
 def test_a_write_finding_no_room_ends_any_entry_point_with_one_line():

@@ -283,6 +283,7 @@ def test_state_mean_table_interpolates_in_log_stress_at_the_nearest_phi():
 
 def test_a_model_on_the_state_mean_predicts_the_lookup_when_its_network_says_nothing(tiny_files):
     import torch
+    from conftest import resgcn
     from torch_geometric.loader import DataLoader
 
     from rheograph.learn.module import SurrogateModule
@@ -291,7 +292,7 @@ def test_a_model_on_the_state_mean_predicts_the_lookup_when_its_network_says_not
     graphs = [g for f in tiny_files for g in snapshot_graphs(read_snapshots(f), settings, run_id=0)]
     batch = next(iter(DataLoader(graphs, batch_size=len(graphs))))
     module = SurrogateModule(
-        edge_in=len(settings.edge_features), global_in=len(settings.graph_inputs), targets=settings.targets,
+        net=resgcn(len(settings.edge_features), len(settings.graph_inputs)), targets=settings.targets,
         on_state_mean=True,
     )  # fmt: skip
     module.fit_target_scaling(batch.y, batch.stress, batch.u, phi=batch.phi, jammed=batch.jammed)

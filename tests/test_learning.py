@@ -11,6 +11,7 @@ import h5py
 import numpy as np
 import pytest
 import torch
+from conftest import resgcn
 from hydra import compose, initialize_config_dir
 from torch_geometric.data import Batch
 
@@ -271,7 +272,7 @@ def quick_folds(tiny_files, tmp_path) -> list[str]:
         "trainer.max_epochs=3",
         "~logger",
         "trainer.enable_progress_bar=false",
-        "model.hidden=8",
+        "model.net.hidden=8",
     ]
 
 
@@ -326,9 +327,9 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             "~logger",
             "trainer.enable_progress_bar=false",
             "callbacks.early_stopping.patience=1000",
-            "model.hidden=32",
+            "model.net.hidden=32",
             "model.optimizer.lr=2e-3",
-            "model.dropout=0.0",
+            "model.net.dropout=0.0",
             # Pi in sigma0: its spread over the three stresses is the learnable signal asserted below
             # (Pi / sigma of N = 64 snapshots is mostly noise)
             "graph.targets.pi.per_stress=false",
@@ -473,7 +474,7 @@ def test_a_resumed_training_run_keeps_its_finished_folds(tiny_files, tmp_path):
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert [f["fold"] for f in metrics["folds"]] == [0, 1, 2] and np.isfinite(summary["val/loss"])
     with pytest.raises(InputError, match="another configuration"):
-        train_folds(compose_train([*base, "model.hidden=16"]), run_dir)
+        train_folds(compose_train([*base, "model.net.hidden=16"]), run_dir)
 
 
 def test_a_fold_killed_mid_way_resumes_from_its_last_epoch_to_the_uninterrupted_result(tiny_files, tmp_path):
@@ -646,7 +647,7 @@ def test_jammed_snapshots_never_score_or_train_the_viscosity(tiny_files):
 
     graphs = snapshot_graphs(tiny_files[1], SETTINGS, 0)[:2]
     batch = Batch.from_data_list(graphs)
-    module = SurrogateModule(edge_in=6).eval()
+    module = SurrogateModule(net=resgcn()).eval()
     logged = {}
     module.log = lambda name, value, **k: logged.__setitem__(name, float(value.detach()))
 
@@ -732,14 +733,14 @@ def test_non_local_update_keeps_graphs_of_a_batch_apart(tiny_files, global_mixin
 def test_unknown_global_mixing_is_refused_by_name():
     from rheograph.errors import InputError
 
-    with pytest.raises(InputError, match=r"model.global_mixing='transformer' is invalid"):
+    with pytest.raises(InputError, match=r"model.net.global_mixing='transformer' is invalid"):
         ResGCN(2, 6, global_mixing="transformer")
 
 
 def test_unknown_normalisation_is_refused_by_name():
     from rheograph.errors import InputError
 
-    with pytest.raises(InputError, match=r"model.norm='group' is invalid: allowed \('batch', 'layer'\)"):
+    with pytest.raises(InputError, match=r"model.net.norm='group' is invalid: allowed \('batch', 'layer'\)"):
         ResGCN(2, 6, norm="group")
 
 
@@ -782,7 +783,7 @@ def test_pressure_in_stress_units_learns_pi_over_sigma_and_reports_sigma0(tiny_f
     spread = {}
     for per_stress in (False, True):
         per = TargetSpec(pi=Target(scale=0.1, per_stress=per_stress))
-        module = SurrogateModule(edge_in=6, global_in=1, targets=per).eval()
+        module = SurrogateModule(net=resgcn(global_in=1), targets=per).eval()
         module.fit_target_scaling(batch.y, batch.stress, batch.u)
         spread[per_stress] = float(module.target_std[1])
         module._net = lambda b: torch.zeros(b.num_graphs, 3)  # the standardised mean
@@ -996,7 +997,7 @@ def test_z_mu_on_count_learns_the_correction_and_predicts_the_count_from_a_zero_
     on_count = TargetSpec(z_mu=Target(relative_to="frictional_coordination"))
     settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, targets=on_count)
     batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
-    module = SurrogateModule(edge_in=6, global_in=2, targets=on_count, graph_inputs=inputs).eval()
+    module = SurrogateModule(net=resgcn(global_in=2), targets=on_count, graph_inputs=inputs).eval()
     assert module.reference_columns == [(2, 1)]
     module.fit_target_scaling(batch.y, batch.stress, batch.u)
     assert abs(float(module.target_mean[2])) < 1e-6  # Z_mu - count = 0 for every snapshot
@@ -1018,7 +1019,7 @@ def test_viscosity_on_solve_learns_the_correction_to_the_one_solve_viscosity(tin
     on_solve = TargetSpec(eta_r=Target(scale=1.0, relative_to="solve_viscosity"))
     settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs, targets=on_solve)
     batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
-    module = SurrogateModule(edge_in=6, global_in=2, targets=on_solve, graph_inputs=inputs).eval()
+    module = SurrogateModule(net=resgcn(global_in=2), targets=on_solve, graph_inputs=inputs).eval()
     assert module.reference_columns == [(0, 1)]
     correction = (batch.y[:, 0] - batch.u[:, 1]).double()
     assert float(correction.std()) > 0  # the recorded eta_r is not the one-solve value: a real target
@@ -1043,10 +1044,9 @@ def test_target_loss_compares_models_that_learn_in_different_spaces(tiny_files):
     inputs = ("log_stress", "solve_viscosity", "frictional_coordination")
     settings = GraphSettings(cutoff=0.5, min_strain=0.05, graph_inputs=inputs)
     batch = Batch.from_data_list([g for path in tiny_files for g in snapshot_graphs(path, settings, 0)])
-    plain = SurrogateModule(edge_in=6, global_in=3)
+    plain = SurrogateModule(net=resgcn(global_in=3))
     corrected = SurrogateModule(
-        edge_in=6,
-        global_in=3,
+        net=resgcn(global_in=3),
         targets=TargetSpec(
             eta_r=Target(scale=1.0, relative_to="solve_viscosity"),
             pi=Target(scale=0.1, per_stress=True),
@@ -1069,9 +1069,9 @@ def test_target_loss_compares_models_that_learn_in_different_spaces(tiny_files):
 @pytest.mark.parametrize(
     "build,message",
     [
-        (lambda: ResGCN(2, 6, block="dense"), "model.block='dense' is invalid"),
-        (lambda: ResGCN(2, 6, dropout=1.0), "model.dropout=1.0 is invalid"),
-        (lambda: ResGCN(2, 6, hidden=30, global_mixing="attention"), "model.hidden=30 is invalid"),
+        (lambda: ResGCN(2, 6, block="dense"), "model.net.block='dense' is invalid"),
+        (lambda: ResGCN(2, 6, dropout=1.0), "model.net.dropout=1.0 is invalid"),
+        (lambda: ResGCN(2, 6, hidden=30, global_mixing="attention"), "model.net.hidden=30 is invalid"),
         (lambda: _module(optimizer=partial(torch.optim.Adam, lr=float("nan"))), "model.optimizer=.*lr=nan"),
         (
             lambda: _module(optimizer=partial(torch.optim.Adam, weight_decay=-1e-4)),
@@ -1162,7 +1162,7 @@ def test_a_target_without_spread_in_training_is_standardised_by_one_not_by_zero(
     the other targets keep their spread."""
     from rheograph.learn.module import SurrogateModule
 
-    module = SurrogateModule(edge_in=6, global_in=1)
+    module = SurrogateModule(net=resgcn(global_in=1))
     y = torch.tensor([[3.0, 1.0, 0.0], [4.0, 3.0, 0.0], [5.0, 2.0, 0.0]])
     module.fit_target_scaling(y, torch.ones(3), torch.zeros(3, 1))
     torch.testing.assert_close(module.target_std.float(), torch.tensor([1.0, 1.0, 1.0]))
@@ -1213,7 +1213,7 @@ def test_the_composed_model_config_trains_with_partial_optimiser_and_schedule():
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=["model.optimizer.lr=1e-3", "trainer.max_epochs=12"])
-    module = instantiate(cfg.model, _convert_="all")
+    module = instantiate(cfg.model, net={"node_in": 2, "edge_in": 6}, _convert_="all")  # sizes: setup_fold
     assert (
         module.optimizer_factory.func is torch.optim.Adam and module.optimizer_factory.keywords["lr"] == 1e-3
     )
@@ -1287,7 +1287,7 @@ class NarrowNetwork(SurrogateModule):
     """A subclass with an explicit signature of its own (its hparams also hold SurrogateModule's)."""
 
     def __init__(self, width: int = 8, edge_in: int = 6):
-        super().__init__(hidden=width, edge_in=edge_in)
+        super().__init__(net=resgcn(edge_in, hidden=width))
 
 
 def test_network_hparams_rebuild_subclasses_with_their_own_signature():
@@ -1295,6 +1295,7 @@ def test_network_hparams_rebuild_subclasses_with_their_own_signature():
 
     narrow = NarrowNetwork(width=16)
     kwargs = network_hparams(dict(narrow.hparams), NarrowNetwork)
-    assert set(kwargs) <= {"width", "edge_in"} and NarrowNetwork(**kwargs).hparams["hidden"] == 16
-    offset = OffsetNetwork(edge_in=6, hidden=16)  # **kwargs passed on: SurrogateModule's options too
-    assert OffsetNetwork(**network_hparams(dict(offset.hparams), OffsetNetwork)).hparams["hidden"] == 16
+    assert set(kwargs) <= {"width", "edge_in"} and NarrowNetwork(**kwargs).net.node_encoder.out_features == 16
+    offset = OffsetNetwork(net=resgcn(hidden=16))  # **kwargs passed on: SurrogateModule's options too
+    rebuilt = OffsetNetwork(**network_hparams(dict(offset.hparams), OffsetNetwork))
+    assert rebuilt.hparams["net"]["kwargs"]["hidden"] == 16 and rebuilt.net.node_encoder.out_features == 16

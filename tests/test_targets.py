@@ -6,6 +6,7 @@ import json
 
 import pytest
 import torch
+from conftest import resgcn
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
@@ -189,7 +190,9 @@ def _legacy_bundle(module, settings, fmt: str, graph: dict, hparams: dict) -> di
         "domain": {"phi": [0.76, 0.76], "stress": [0.5, 200.0], "n_particles": [400], "size_ratio": [1.4],
                    "edge_min": [0.0] * 6, "edge_max": [1.0] * 6},
     }  # fmt: skip
-    network = {k: v for k, v in dict(module.hparams).items() if k not in ("targets", "graph_inputs")}
+    # earlier versions held the network's options flat among the module's
+    network = {k: v for k, v in dict(module.hparams).items() if k not in ("targets", "graph_inputs", "net")}
+    network.update(module.hparams["net"]["kwargs"])
     key = "hparams" if fmt == "rheograph-surrogate-2" else "hyper_parameters"
     return {**record, key: {**network, **hparams}}
 
@@ -201,7 +204,7 @@ def test_bundles_of_earlier_formats_load_with_their_specification(tmp_path, fmt,
     from rheograph.learn.module import SurrogateModule
 
     inputs = tuple(graph["graph_inputs"])
-    module = SurrogateModule(edge_in=6, global_in=len(inputs), targets=spec, graph_inputs=inputs)
+    module = SurrogateModule(net=resgcn(global_in=len(inputs)), targets=spec, graph_inputs=inputs)
     relax = {"relax_strain": 0.01} if "relaxed_viscosity" in inputs else {}
     graph = {**graph, **relax}
     settings = GraphSettings(graph_inputs=inputs, targets=spec, **relax)
@@ -225,7 +228,7 @@ def test_a_bundle_round_trip_keeps_the_specification(tmp_path):
 
     settings = GraphSettings(graph_inputs=SOLVE_INPUTS, targets=PHYSICS_SOLVE)
     module = SurrogateModule(
-        edge_in=6, global_in=len(SOLVE_INPUTS), targets=PHYSICS_SOLVE, graph_inputs=SOLVE_INPUTS
+        net=resgcn(global_in=len(SOLVE_INPUTS)), targets=PHYSICS_SOLVE, graph_inputs=SOLVE_INPUTS
     )
     domain = {"phi": [0.76, 0.76], "stress": [0.5, 200.0], "n_particles": [400], "size_ratio": [1.4],
               "edge_min": [0.0] * 6, "edge_max": [1.0] * 6}  # fmt: skip

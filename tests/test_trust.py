@@ -204,7 +204,7 @@ def test_a_pickle_payload_in_a_resume_checkpoint_never_runs_and_the_fold_starts_
                 "~logger",
                 "report=false",
                 "fold=0",
-                "model.hidden=8",
+                "model.net.hidden=8",
                 "threads=1",
             ],
         )

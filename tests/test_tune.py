@@ -72,7 +72,7 @@ def test_study_survives_failures_prunes_and_resumes(tiny_files, tmp_path):
         merged = OmegaConf.merge(train, OmegaConf.load(tmp_path / "experiment" / "resgcn_best.yaml"))
         assert set(OmegaConf.to_container(merged.model)) == set(OmegaConf.to_container(train.model))
         assert len(merged.model.loss_weights) == 3 and merged.model.optimizer.lr > 0
-        assert isinstance(merged.model.hidden, int) and isinstance(merged.data.batch_size, int)
+        assert isinstance(merged.model.net.hidden, int) and isinstance(merged.data.batch_size, int)
 
         cfg2 = compose(
             config_name="tune", overrides=[o.replace("tune.n_trials=3", "tune.n_trials=4") for o in overrides]
@@ -125,20 +125,26 @@ def test_best_experiment_carries_the_tuned_values_and_the_studys_inputs(tmp_path
 
     space = {
         "model.optimizer.lr": {"type": "float", "low": 1e-4, "high": 1e-2, "log": True},
-        "model.hidden": {"type": "categorical", "choices": [32, 64]},
+        "model.net.hidden": {"type": "categorical", "choices": [32, 64]},
         "model.loss_weights": {"type": "categorical", "choices": [[1.0, 1.0, 1.0], [2.0, 1.0, 1.0]]},
     }
     study = optuna.create_study(study_name="unit_test_search")  # no such experiment in conf/
     dists = {
         "model.optimizer.lr": optuna.distributions.FloatDistribution(1e-4, 1e-2, log=True),
-        "model.hidden": optuna.distributions.CategoricalDistribution(["32", "64"]),
+        "model.net.hidden": optuna.distributions.CategoricalDistribution(["32", "64"]),
         "model.loss_weights": optuna.distributions.CategoricalDistribution(
             ["[1.0, 1.0, 1.0]", "[2.0, 1.0, 1.0]"]
         ),
     }
     for value, params in [
-        (0.5, {"model.optimizer.lr": 1e-3, "model.hidden": "32", "model.loss_weights": "[1.0, 1.0, 1.0]"}),
-        (0.2, {"model.optimizer.lr": 2e-3, "model.hidden": "64", "model.loss_weights": "[2.0, 1.0, 1.0]"}),
+        (
+            0.5,
+            {"model.optimizer.lr": 1e-3, "model.net.hidden": "32", "model.loss_weights": "[1.0, 1.0, 1.0]"},
+        ),
+        (
+            0.2,
+            {"model.optimizer.lr": 2e-3, "model.net.hidden": "64", "model.loss_weights": "[2.0, 1.0, 1.0]"},
+        ),
     ]:
         study.add_trial(optuna.trial.create_trial(params=params, distributions=dists, value=value))
     path = write_best_experiment(study, tmp_path / "experiment", ["graph=paper", "fold=0", "~logger"], space)
@@ -148,7 +154,7 @@ def test_best_experiment_carries_the_tuned_values_and_the_studys_inputs(tmp_path
             overrides=[f"hydra.searchpath=[file://{tmp_path}]", f"experiment={path.stem}"],
         )
         paper = compose(config_name="train", overrides=["graph=paper"])
-    assert cfg.model.optimizer.lr == 2e-3 and cfg.model.hidden == 64
+    assert cfg.model.optimizer.lr == 2e-3 and cfg.model.net.hidden == 64
     assert list(cfg.model.loss_weights) == [2.0, 1.0, 1.0]
     assert cfg.graph.edge_features == paper.graph.edge_features  # the inputs it was tuned on
     assert cfg.fold is None and cfg.get("logger") is not None  # the search protocol is not carried
@@ -169,7 +175,8 @@ def test_the_defaults_are_queued_once_as_a_trial():
     assert queued.state == optuna.trial.TrialState.WAITING and queued.user_attrs["defaults"]
     params = queued.system_attrs["fixed_params"]
     assert (
-        params["model.optimizer.lr"] == train.model.optimizer.lr and params["model.aggr"] == train.model.aggr
+        params["model.optimizer.lr"] == train.model.optimizer.lr
+        and params["model.net.aggr"] == train.model.net.aggr
     )
     assert params["model.loss_weights"] == str(list(train.model.loss_weights))
     assert set(params) == set(cfg.tune.search_space)

@@ -7,10 +7,11 @@ table = model.predict(positions, radii, box, le_offset, stress=10, phi=0.76, mu=
                       kt_ratio=0.5, delta=1e-3, lub_max_gap=0.5)
 snaps = rheograph.read_snapshots("par_run.dat")   # rheograph, bare or LF_DEM sources
 rheograph.register_network(MyModule)          # bundles naming this SurrogateModule subclass load as it
+rheograph.register_graph_network(MyNet)       # model.net may name this network, and bundles holding it load
 """
 
 __version__ = "0.1.0"
-__all__ = ["list_models", "load_model", "read_snapshots", "register_network"]
+__all__ = ["list_models", "load_model", "read_snapshots", "register_graph_network", "register_network"]
 
 
 def __dir__():
@@ -31,6 +32,10 @@ def __getattr__(name):
         from rheograph.learn.networks import register_network
 
         return register_network
+    if name == "register_graph_network":
+        from rheograph.learn.nets import register_graph_network
+
+        return register_graph_network
     if name == "read_snapshots":
         from rheograph.io.snapshots import read_snapshots
 

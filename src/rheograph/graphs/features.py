@@ -241,6 +241,9 @@ def snapshot_descriptors(pairs: dict, n_particles: int, area: float) -> np.ndarr
     )
 
 
+NODE_FEATURES = 2  # columns of node_features: the one-hot radius
+
+
 def node_features(radii, size_ratio):
     """One-hot (N, 2): column 0 small (a = 1), column 1 large (a = size_ratio)."""
     large = np.isclose(radii, size_ratio)

@@ -20,16 +20,19 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import GraphSettings
-from rheograph.graphs.targets import LEGACY_GRAPH_KEYS, LEGACY_MODULE_KEYS, from_legacy, spec_of_record
+from rheograph.graphs.targets import LEGACY_GRAPH_KEYS, spec_of_record
 from rheograph.learn.datamodule import suspension_record
-from rheograph.learn.module import SurrogateModule, network_hparams, physical_targets
+from rheograph.learn.module import SurrogateModule, network_hparams, physical_targets, upgraded_hparams
+from rheograph.learn.nets import graph_network
 from rheograph.learn.networks import registered_network
 
-BUNDLE_FORMAT = "rheograph-surrogate-4"
-# read through _upgraded, the one place that knows them: format 3 states the targets in the form of
-# earlier versions (graph booleans and scales, module columns: rheograph.graphs.targets.from_legacy);
-# format 2 (before bundles were Lightning checkpoints) also holds the hyperparameters under "hparams"
-OLDER_FORMATS = ("rheograph-surrogate-3", "rheograph-surrogate-2")
+BUNDLE_FORMAT = "rheograph-surrogate-5"
+# read through _upgraded, the one place that knows them (with rheograph.learn.module.upgraded_hparams):
+# format 4 holds the network's options flat among the module's hyperparameters (the network then always
+# a ResGCN); format 3 also states the targets in the form of earlier versions (graph booleans and scales,
+# module columns: rheograph.graphs.targets.from_legacy); format 2 (before bundles were Lightning
+# checkpoints) also holds the hyperparameters under "hparams"
+OLDER_FORMATS = ("rheograph-surrogate-4", "rheograph-surrogate-3", "rheograph-surrogate-2")
 
 
 def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: str, domain: dict) -> None:
@@ -108,7 +111,8 @@ def read_bundle(path: str | Path) -> dict:
 
 def _upgraded(bundle: dict) -> dict:
     """A bundle of an older format in the current one (the weights and every other record unchanged; the
-    targets as a specification, through rheograph.graphs.targets.from_legacy)."""
+    targets as a specification and the network as a record of its class and options, through
+    rheograph.learn.module.upgraded_hparams)."""
     if bundle["format"] == BUNDLE_FORMAT:
         return bundle
     import lightning as L
@@ -119,15 +123,10 @@ def _upgraded(bundle: dict) -> dict:
     upgraded.update({"format": BUNDLE_FORMAT, "pytorch-lightning_version": L.__version__})
     graph, hparams = upgraded.get("graph"), upgraded.get("hyper_parameters")
     if isinstance(graph, dict) and isinstance(hparams, dict):
-        targets = from_legacy(graph, hparams).to_config()
+        upgraded["hyper_parameters"] = upgraded_hparams(hparams, graph)
         upgraded["graph"] = {
             **{k: v for k, v in graph.items() if k not in LEGACY_GRAPH_KEYS},
-            "targets": targets,
-        }
-        upgraded["hyper_parameters"] = {
-            **{k: v for k, v in hparams.items() if k not in LEGACY_MODULE_KEYS},
-            "targets": targets,
-            "graph_inputs": list(graph.get("graph_inputs", ())),
+            "targets": upgraded["hyper_parameters"]["targets"],
         }
     return upgraded
 
@@ -150,6 +149,9 @@ def load_bundle(
     ``network_class``: one registered for this call)."""
     bundle = read_bundle(path)
     module_class = registered_network(bundle.get("module_class"), path, network_class)
+    net = (bundle.get("hyper_parameters") or {}).get("net")
+    if isinstance(net, dict):  # its graph network: a registered class, or refused in one line
+        graph_network(net.get("name"), path)
     try:  # a damaged bundle: entries missing or of the wrong type, weights of another network
         module = module_class(**network_hparams(bundle["hyper_parameters"], module_class))
         module.load_state_dict(bundle["state_dict"])

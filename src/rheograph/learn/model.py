@@ -96,22 +96,22 @@ class ResGCN(nn.Module):
     ):
         super().__init__()
         if block not in BLOCKS:
-            raise InputError(f"model.block={block!r} is invalid: allowed {BLOCKS}")
+            raise InputError(f"model.net.block={block!r} is invalid: allowed {BLOCKS}")
         if pool not in POOLS:
-            raise InputError(f"model.pool={pool!r} is invalid: allowed {sorted(POOLS)}")
+            raise InputError(f"model.net.pool={pool!r} is invalid: allowed {sorted(POOLS)}")
         if aggr not in AGGRS:
-            raise InputError(f"model.aggr={aggr!r} is invalid: allowed {AGGRS}")
+            raise InputError(f"model.net.aggr={aggr!r} is invalid: allowed {AGGRS}")
         if norm not in NORMS:
-            raise InputError(f"model.norm={norm!r} is invalid: allowed {tuple(NORMS)}")
+            raise InputError(f"model.net.norm={norm!r} is invalid: allowed {tuple(NORMS)}")
         if global_mixing not in GLOBAL_MIXING:
-            raise InputError(f"model.global_mixing={global_mixing!r} is invalid: allowed {GLOBAL_MIXING}")
+            raise InputError(f"model.net.global_mixing={global_mixing!r} is invalid: allowed {GLOBAL_MIXING}")
         if num_layers < 1 or hidden < 1 or head_layers < 1:
-            raise InputError("model.num_layers, model.hidden and model.head_layers must be >= 1")
+            raise InputError("model.net.num_layers, model.net.hidden and model.net.head_layers must be >= 1")
         if not 0.0 <= dropout < 1.0:
-            raise InputError(f"model.dropout={dropout} is invalid: allowed 0 <= dropout < 1")
+            raise InputError(f"model.net.dropout={dropout} is invalid: allowed 0 <= dropout < 1")
         if global_mixing == "attention" and hidden % GraphAttention.HEADS:
             raise InputError(
-                f"model.hidden={hidden} is invalid with model.global_mixing=attention: a multiple of "
+                f"model.net.hidden={hidden} is invalid with model.net.global_mixing=attention: a multiple of "
                 f"{GraphAttention.HEADS} (the attention heads)"
             )
         self.block, self.pool_name, self.global_in = block, pool, global_in

@@ -6,6 +6,7 @@ import functools
 import inspect
 import logging
 import math
+from collections.abc import Mapping
 
 import lightning as L
 import numpy as np
@@ -14,8 +15,9 @@ from torch import nn
 
 from rheograph.errors import InputError
 from rheograph.graphs.features import inverse_transform
-from rheograph.graphs.targets import TargetSpec, from_legacy, is_legacy
+from rheograph.graphs.targets import LEGACY_MODULE_KEYS, TargetSpec, from_legacy
 from rheograph.learn.model import ResGCN
+from rheograph.learn.nets import build_net, class_name, net_record
 
 log = logging.getLogger("rheograph")
 
@@ -80,6 +82,44 @@ def network_hparams(hparams: dict, module_class: type | None = None) -> dict:
     else:  # an explicit signature: only what it takes (the hparams also hold its parent's)
         accepted = set(own)
     return {k: v for k, v in hparams.items() if k in accepted}
+
+
+# the network options SurrogateModule took itself before ``model.net`` (model files of formats 2-4), at
+# the defaults it gave them; the network was then always a ResGCN with three outputs
+LEGACY_NET_OPTIONS = {
+    "node_in": 2,
+    "edge_in": 6,
+    "hidden": 64,
+    "num_layers": 2,
+    "aggr": "softmax",
+    "block": "res+",
+    "dropout": 0.1,
+    "pool": "mean",
+    "global_in": 0,
+    "head_layers": 1,
+    "edge_readout": False,
+    "norm": "batch",
+    "global_mixing": "none",
+}
+
+
+def upgraded_hparams(hparams: Mapping, graph: Mapping | None = None) -> dict:
+    """The module hyperparameters of a model of any version in the current form: the one adapter from
+    earlier forms, for model files (rheograph.learn.bundle) and Lightning's ``load_from_checkpoint``
+    (``SurrogateModule.on_load_checkpoint``) alike.  Without ``targets``, the target specification is read
+    from the graph settings ``graph`` and the module's own earlier keys (rheograph.graphs.targets.
+    from_legacy); without ``net``, the network is the ResGCN that the flat options (``hidden``,
+    ``num_layers``, ... at their former defaults where absent) described.  A current record is returned
+    as it is."""
+    out = dict(hparams)
+    if "targets" not in out and isinstance(graph, Mapping):
+        targets = from_legacy(graph, out).to_config()
+        out = {k: v for k, v in out.items() if k not in LEGACY_MODULE_KEYS}
+        out.update(targets=targets, graph_inputs=list(graph.get("graph_inputs", ())))
+    if "net" not in out:
+        options = {key: out.pop(key, default) for key, default in LEGACY_NET_OPTIONS.items()}
+        out["net"] = {"name": class_name(ResGCN), "kwargs": options}
+    return out
 
 
 def physical_targets(y_transformed: np.ndarray, targets: TargetSpec) -> np.ndarray:
@@ -319,10 +359,19 @@ class EpochLog(L.pytorch.callbacks.Callback):
 
 
 class SurrogateModule(L.LightningModule):
-    """ResGCN + weighted Huber loss (``huber_beta``) over standardised targets (η_r masked on jammed
-    snapshots), trained with the optimiser and learning-rate schedule given as partials (``optimizer``:
-    params -> torch optimiser; ``scheduler``: (optimiser, max_epochs=) -> torch scheduler, stepped per
-    epoch, or None for a constant rate), as Hydra's ``model.optimizer`` / ``model.scheduler``.
+    """A graph network (``net``) + weighted Huber loss (``huber_beta``) over standardised targets (η_r
+    masked on jammed snapshots), trained with the optimiser and learning-rate schedule given as partials
+    (``optimizer``: params -> torch optimiser; ``scheduler``: (optimiser, max_epochs=) -> torch scheduler,
+    stepped per epoch, or None for a constant rate), as Hydra's ``model.optimizer`` / ``model.scheduler``.
+
+    ``net`` is Hydra's ``model.net``: a registered graph-network class with its options, given as a
+    partial (``_partial_: true``; rheograph.learn.nets), whose input sizes ``node_in``, ``edge_in`` and
+    ``global_in`` the training code fills in from the graph settings (rheograph.learn.train.setup_fold)
+    — they follow from the data, not from a choice — and which the module builds once; or the plain
+    record ``{"name", "kwargs"}`` a model file holds.  The module keeps that record as its ``net``
+    hyperparameter, so that a checkpoint rebuilds the network through the registry alone (a network
+    given already built could not be recorded).  ``None``: the ResGCN of the module's former defaults,
+    replaced by an older checkpoint's own network when Lightning loads one (``on_load_checkpoint``).
 
     ``target_mean``/``target_std`` (fitted on the training fold) and the target specification
     (``targets``, rheograph.graphs.targets: each target's transform and what it is learned relative to)
@@ -352,19 +401,7 @@ class SurrogateModule(L.LightningModule):
 
     def __init__(
         self,
-        node_in: int = 2,
-        edge_in: int = 6,
-        hidden: int = 64,
-        num_layers: int = 2,
-        aggr: str = "softmax",
-        block: str = "res+",
-        dropout: float = 0.1,
-        pool: str = "mean",
-        global_in: int = 0,
-        head_layers: int = 1,
-        edge_readout: bool = False,
-        norm: str = "batch",
-        global_mixing: str = "none",
+        net=None,
         optimizer=None,
         scheduler=None,
         loss_weights=(1.0, 1.0, 1.0),
@@ -375,17 +412,24 @@ class SurrogateModule(L.LightningModule):
         state_mean_by_stress: bool = True,
     ):
         super().__init__()
+        # the network as a plain record (class name, options): what a model file holds and rebuilds
+        # through the registry (rheograph.learn.nets); None: the network of the module's former defaults,
+        # which on_load_checkpoint replaces by an older model file's own
+        record = upgraded_hparams({})["net"] if net is None else net_record(net)
         self.targets = TargetSpec.from_config(targets)
-        if graph_inputs and len(graph_inputs) != global_in:
+        global_in = record["kwargs"].get("global_in") if net is not None else None  # None: placeholder
+        if graph_inputs and global_in is not None and len(graph_inputs) != global_in:
             raise InputError(
-                f"graph_inputs={list(graph_inputs)} names {len(graph_inputs)} columns, global_in={global_in}"
+                f"graph_inputs={list(graph_inputs)} names {len(graph_inputs)} columns, "
+                f"model.net.global_in={global_in}"
             )
         # (target, graph-input column) of every target learned relative to an input
         self.reference_columns = self.targets.columns(graph_inputs)
         targets, graph_inputs = self.targets.to_config(), list(graph_inputs)  # hyperparameters: plain values
         # the optimiser and schedule are how a network is trained, not what it is: a checkpoint rebuilds
         # the network without them (they stay in the run's Hydra config)
-        self.save_hyperparameters(ignore=["optimizer", "scheduler"])
+        self.save_hyperparameters(ignore=["optimizer", "scheduler", "net"])
+        self.hparams["net"] = record
         self.optimizer_factory = optimizer
         self.scheduler_factory = scheduler
         if optimizer is not None:
@@ -394,22 +438,7 @@ class SurrogateModule(L.LightningModule):
             raise InputError(f"model.huber_beta={huber_beta} is invalid: allowed >= 0 (0: L1)")
         if len(loss_weights) != 3 or min(loss_weights) < 0:
             raise InputError(f"model.loss_weights={list(loss_weights)}: three weights >= 0")
-        self.net = ResGCN(
-            node_in,
-            edge_in,
-            hidden,
-            num_layers,
-            aggr,
-            block,
-            dropout,
-            pool,
-            3,
-            global_in=global_in,
-            head_layers=head_layers,
-            edge_readout=edge_readout,
-            norm=norm,
-            global_mixing=global_mixing,
-        )
+        self.net = build_net(record)
         self.register_buffer("target_mean", torch.zeros(3))
         self.register_buffer("target_std", torch.ones(3))
         # spread of the transformed targets themselves (Pi in sigma0), whatever the network learns: the
@@ -428,14 +457,19 @@ class SurrogateModule(L.LightningModule):
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
         """A checkpoint of an earlier version (a shipped model's bundle read by Lightning's
-        ``load_from_checkpoint``) states its targets in the form of that version, which Lightning's
-        constructor call drops: they are read from it (rheograph.graphs.targets.from_legacy)."""
+        ``load_from_checkpoint``) states its targets and its network in the form of that version, which
+        Lightning's constructor call drops: they are read from it (``upgraded_hparams``, the one
+        adapter) and the network rebuilt as the checkpoint's, before its weights are loaded."""
         hparams, graph = checkpoint.get("hyper_parameters") or {}, checkpoint.get("graph")
-        if is_legacy(hparams) and isinstance(graph, dict):
-            self.targets = from_legacy(graph, hparams)
-            graph_inputs = list(graph.get("graph_inputs", ()))
-            self.reference_columns = self.targets.columns(graph_inputs)
-            self.hparams.update(targets=self.targets.to_config(), graph_inputs=graph_inputs)
+        upgraded = upgraded_hparams(hparams, graph)
+        if "targets" not in hparams and "targets" in upgraded:
+            self.targets = TargetSpec.from_config(upgraded["targets"])
+            self.reference_columns = self.targets.columns(upgraded["graph_inputs"])
+            self.hparams.update(targets=upgraded["targets"], graph_inputs=upgraded["graph_inputs"])
+        if "net" not in hparams:
+            if upgraded["net"] != self.hparams["net"]:
+                self.net = build_net(upgraded["net"], "checkpoint")
+            self.hparams["net"] = upgraded["net"]
 
     def _corrected_targets(self, y: torch.Tensor, stress: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """Transformed targets (G, 3) -> per stress and minus the computed inputs they correct."""

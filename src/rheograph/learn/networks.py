@@ -16,18 +16,10 @@ A subclass is registered in one of three ways:
 
 from __future__ import annotations
 
-from importlib.metadata import entry_points
-
 from rheograph.errors import InputError
-
-ENTRY_POINT_GROUP = "rheograph.networks"
+from rheograph.learn.nets import ENTRY_POINT_GROUP, class_name, entry_point_class
 
 _registered: dict[str, type] = {}
-
-
-def class_name(cls: type) -> str:
-    """The name a bundle records for ``cls``: ``module:qualname``."""
-    return f"{cls.__module__}:{cls.__qualname__}"
 
 
 def _check_network(cls, where: str) -> type:
@@ -46,21 +38,8 @@ def register_network(cls: type) -> type:
 
 
 def _from_entry_points(name: str) -> type | None:
-    """The class of an installed package's ``rheograph.networks`` entry point recorded as ``name``.
-    Entry points are the user's installation, so loading them (importing their packages) is trusted;
-    one whose value is ``name`` itself is tried first, the others only if none is."""
-    found = list(entry_points(group=ENTRY_POINT_GROUP))
-    for entry in sorted(found, key=lambda e: e.value != name):
-        try:
-            cls = entry.load()
-        except Exception as exc:  # a broken installation: its own error, named
-            raise InputError(
-                f"entry point {entry.name} = {entry.value} ({ENTRY_POINT_GROUP}) cannot be loaded: "
-                f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-            ) from exc
-        if isinstance(cls, type) and class_name(cls) == name:
-            return _check_network(cls, f"entry point {entry.name} ({ENTRY_POINT_GROUP})")
-    return None
+    """The class of an installed package's ``rheograph.networks`` entry point recorded as ``name``."""
+    return entry_point_class(name, _check_network)
 
 
 def registered_network(name, where, network_class: type | None = None) -> type:

@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from rheograph.errors import InputError, OtherRunError
 from rheograph.graphs.dataset import GraphSettings
+from rheograph.graphs.features import NODE_FEATURES
 from rheograph.graphs.targets import TargetSpec
 from rheograph.io.snapshots import data_fingerprint
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
@@ -25,6 +26,7 @@ from rheograph.learn.datamodule import SPLIT_VERSION, check_num_folds
 from rheograph.learn.error_model import fit_error_model, write_error_model
 from rheograph.learn.jamming import jam_rule_scores
 from rheograph.learn.module import (
+    LEGACY_NET_OPTIONS,
     TARGET_NAMES,
     EpochLog,
     FoldResumePoint,
@@ -80,6 +82,17 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
     return GraphSettings(**values)
 
 
+def input_sizes(settings: GraphSettings) -> dict:
+    """The input sizes of ``model.net`` that the graph settings decide (not options of their own): node
+    features (the one-hot radius), edge features and graph-level inputs; ``setup_fold`` completes the
+    network's partial with them."""
+    return {
+        "node_in": NODE_FEATURES,
+        "edge_in": len(settings.edge_features),
+        "global_in": len(settings.graph_inputs),
+    }
+
+
 def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
     """(datamodule, module) of fold ``k``: split made, target and edge-feature scaling fitted on its
     training part and set in the (untrained) module."""
@@ -87,8 +100,7 @@ def setup_fold(cfg: DictConfig, k: int, settings: GraphSettings):
     dm.setup()
     module = instantiate(
         cfg.model,
-        edge_in=len(settings.edge_features),
-        global_in=len(settings.graph_inputs),
+        net=input_sizes(settings),
         targets=settings.targets.to_config(),
         graph_inputs=list(settings.graph_inputs),
         state_mean_by_stress=settings.stress_known,
@@ -311,6 +323,12 @@ def check_run_settings(cfg: DictConfig) -> None:
     schedule spans it: Lightning's -1 for "unlimited" would make it oscillate), threads >= 1 or null
     (null: the cores this process may use, at most 2), fold processes >= 1, an optimiser and schedule
     that torch accepts."""
+    flat = [key for key in cfg.model if key in LEGACY_NET_OPTIONS]
+    if flat:  # an experiment file of an earlier version: the network's options moved under model.net
+        raise InputError(
+            f"model.{flat[0]} is an option of the network: set model.net.{flat[0]} (model.net holds "
+            f"the network's options: {', '.join(f'model.{k}' for k in flat)})"
+        )
     check_training_factories(instantiate(cfg.model.optimizer), instantiate(cfg.model.get("scheduler")))
     epochs = cfg.trainer.get("max_epochs")
     if not isinstance(epochs, int) or epochs < 1:
@@ -405,6 +423,24 @@ NEUTRAL_LATER_OPTIONS = (
 )
 
 
+DEFAULT_NET_TARGET = "rheograph.learn.model.ResGCN"
+
+
+def legacy_model_options(model: dict) -> dict:
+    """``model`` settings with the network (``model.net``) in the form of earlier versions, in which runs
+    trained before it have their fingerprint: its options flat among the model's, its ``_target_`` left
+    out where it is the ResGCN (then the only network) and kept as ``net_target`` otherwise."""
+    model = dict(model)
+    net = model.pop("net", None)
+    if not isinstance(net, dict):
+        return model if net is None else {**model, "net": net}
+    target = net.get("_target_")
+    options = {k: v for k, v in net.items() if not k.startswith("_")}
+    if target != DEFAULT_NET_TARGET:
+        options["net_target"] = target
+    return {**model, **options}
+
+
 def config_fingerprint(cfg: DictConfig) -> str:
     """Hash of everything that determines the trained folds (not which folds run, nor reporting)."""
     import hashlib
@@ -418,6 +454,8 @@ def config_fingerprint(cfg: DictConfig) -> str:
     graph = keep.get("graph", {})
     if "targets" in graph:
         graph.update(TargetSpec.from_config(graph.pop("targets")).legacy_options())
+    # the network's options in the form of earlier versions, flat among the model's (model.hidden, ...)
+    keep["model"] = legacy_model_options(keep.get("model", {}))
     # options added later, at the value that reproduces what came before them: left out, so that runs
     # trained before the option existed stay valid (resumable, reportable)
     for group, key, neutral in NEUTRAL_LATER_OPTIONS:
