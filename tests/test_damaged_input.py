@@ -308,7 +308,26 @@ def test_positions_in_other_units_are_flagged_with_finite_output_and_no_solve_vi
     assert table["in_domain"][0] == 0
     for name in ("eta", "pressure", "z_mu"):
         assert np.isfinite(table[f"{name}_pred"]).all() and np.isfinite(table[f"{name}_pred_std"]).all()
-    assert np.isnan(table["eta_solve"][0]) and "not a viscosity" in table["notes"][0]
+    assert (
+        np.isnan(table["eta_solve"][0])
+        and "the one-solve gives no viscosity" in table["notes"][0]
+        and "this snapshot: eta_r = " in table["notes"][0]
+    )
+
+
+def test_a_reason_with_a_value_per_snapshot_is_warned_once(model_and_snapshot, capsys):
+    """Snapshots whose one-solve gives no viscosity each keep their value in their note; the warning
+    names the reason once, with how many snapshots it concerns, not once per value."""
+    model, snaps, k = model_and_snapshot
+    table = model.predict(
+        np.stack([snaps.positions[k] * 0.9, snaps.positions[k - 1] * 0.9]), snaps.radii,
+        (snaps.lx, snaps.ly), snaps.le_offset[[k, k - 1]], stress=snaps.stress, phi=snaps.phi, **PHYSICAL,
+    )  # fmt: skip
+    warning = capsys.readouterr().err
+    assert np.isnan(table["eta_solve"]).all()
+    assert len({note.split("this snapshot: ")[1] for note in table["notes"]}) == 2  # two values
+    assert warning.count("the one-solve gives no viscosity") == 1 and "this snapshot" not in warning
+    assert "edge features ['contact_normal'" in warning  # other reasons whole
     assert np.isfinite(table["pressure_spring"]).all() and np.isfinite(table["z_mu_counted"]).all()
 
 

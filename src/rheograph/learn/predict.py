@@ -71,6 +71,9 @@ EXACT_POSITION_PRECISION = 3e-5
 # when a snapshot's overlaps betray imprecise positions that it did not declare
 TRACKING_PRECISION = 0.01
 
+# a reason's snapshot-specific value, kept in that snapshot's note and left out of the summary warning
+ROW_VALUE_OPEN = " — this snapshot: "
+
 
 def trained_noise(domain: dict) -> tuple[float, float]:
     """(eps_min, eps_max) [a] of the position noise a model was trained on; exact models (0, 0)."""
@@ -380,8 +383,8 @@ class Surrogate:
         no_viscosity = (physics[:, 0] <= 0) | np.isinf(physics[:, 0])
         for k in np.flatnonzero(no_viscosity):
             row_reasons[k].append(
-                f"the one-solve gives eta_r = {physics[k, 0]:.3g}, not a viscosity (its shear rate vanishes "
-                "or runs against the stress): eta_solve left empty"
+                "the one-solve gives no viscosity (its shear rate vanishes or runs against the stress): "
+                f"eta_solve left empty{ROW_VALUE_OPEN}eta_r = {physics[k, 0]:.3g}"
             )
         physics[no_viscosity, 0] = np.nan
         in_domain &= ~no_viscosity
@@ -389,7 +392,9 @@ class Surrogate:
         in_domain &= not notes
         if not in_domain.all():
             # each reason once, with how many snapshots it concerns where that is not all of them
-            counts = collections.Counter(reason for r in row_reasons for reason in r)
+            counts = collections.Counter(
+                reason.split(ROW_VALUE_OPEN)[0] for r in row_reasons for reason in r
+            )  # a row's own value (in its note) left out: one line per reason
             n = len(graphs)
             summary = [text if k == n else f"{text} ({k} of {n} snapshots)" for text, k in counts.items()]
             print(
