@@ -61,39 +61,44 @@ def simulation_bytes(n_particles: int, dim: int = 2) -> float:
     return MARGIN * SIMULATION_BYTES_PER_PARTICLE * n_particles
 
 
-def edges_per_particle(phi: float, cutoff: float, size_ratio: float = 1.4) -> float:
+def edges_per_particle(phi: float, cutoff: float, size_ratio: float = 1.4, dim: int = 2) -> float:
     """An upper estimate of a particle's edges (surface gap < ``cutoff`` [a]) in a bidisperse packing of
-    equal-area species at area fraction ``phi``: the particles whose centres lie within two mean radii
-    plus the cut-off, less those closer than two small radii (none, without overlaps), plus six for the
-    contacts that crowd the first shell (measured 4.6 / 9.7 / 29.6 at phi 0.76 and cut-offs 0.5 / 2 / 5,
-    estimated 8.5 / 14.8 / 35)."""
+    equal-area (3D: equal-volume) species at area (volume) fraction ``phi``: the particles whose centres
+    lie within two mean radii plus the cut-off, less those closer than two small radii (none, without
+    overlaps), plus the contacts that crowd the first shell, six in 2D and twelve in 3D (2D measured
+    4.6 / 9.7 / 29.6 at phi 0.76 and cut-offs 0.5 / 2 / 5, estimated 8.5 / 14.8 / 35)."""
     phi = phi if math.isfinite(phi) else 0.9  # unknown: denser than any flowing packing
     mean_radius = (1.0 + size_ratio) / 2.0
-    mean_area = math.pi * 2.0 * size_ratio**2 / (1.0 + size_ratio**2)  # pi <a^2>, equal area per species
-    density = phi / mean_area
     reach = 2.0 * mean_radius + cutoff
-    return 6.0 + density * math.pi * max(reach**2 - 4.0, 0.0)
+    if dim == 3:
+        # 4 pi <a^3> / 3 with equal volumes per species: <a^3> = 2 r^3 / (1 + r^3)
+        mean_volume = 4.0 * math.pi / 3.0 * 2.0 * size_ratio**3 / (1.0 + size_ratio**3)
+        return 12.0 + phi / mean_volume * 4.0 * math.pi / 3.0 * max(reach**3 - 8.0, 0.0)
+    mean_area = math.pi * 2.0 * size_ratio**2 / (1.0 + size_ratio**2)  # pi <a^2>, equal area per species
+    return 6.0 + phi / mean_area * math.pi * max(reach**2 - 4.0, 0.0)
 
 
-def graph_bytes(n_particles: int, n_snapshots: int, phi: float, cutoff: float, size_ratio: float) -> float:
-    """Estimated memory [bytes] of the graphs of ``n_snapshots`` snapshots of ``n_particles`` (edges and
-    their features, node features, the builder's temporaries)."""
+def graph_bytes(
+    n_particles: int, n_snapshots: int, phi: float, cutoff: float, size_ratio: float, dim: int = 2
+) -> float:
+    """Estimated memory [bytes] of the graphs of ``n_snapshots`` snapshots of ``n_particles`` in ``dim``
+    dimensions (edges and their features, node features, the builder's temporaries)."""
     per_snapshot = (
-        GRAPH_BYTES_PER_EDGE * edges_per_particle(phi, cutoff, size_ratio) + GRAPH_BYTES_PER_PARTICLE
+        GRAPH_BYTES_PER_EDGE * edges_per_particle(phi, cutoff, size_ratio, dim) + GRAPH_BYTES_PER_PARTICLE
     )
     return MARGIN * per_snapshot * n_particles * n_snapshots
 
 
 def prediction_bytes(
-    n_particles: int, n_snapshots: int, phi: float, cutoff: float, size_ratio: float
+    n_particles: int, n_snapshots: int, phi: float, cutoff: float, size_ratio: float, dim: int = 2
 ) -> float:
     """Estimated peak memory [bytes] of predicting ``n_snapshots`` snapshots of ``n_particles``: their
     graphs, one simulation's worth for the inputs computed under the simulator (the one-solve, a
     relaxation), and a forward pass over a batch of up to ``PREDICTION_BATCH`` graphs."""
     batch_nodes = min(n_snapshots, PREDICTION_BATCH) * n_particles
     return (
-        graph_bytes(n_particles, n_snapshots, phi, cutoff, size_ratio)
-        + simulation_bytes(n_particles)
+        graph_bytes(n_particles, n_snapshots, phi, cutoff, size_ratio, dim)
+        + simulation_bytes(n_particles, dim)
         + MARGIN * PREDICTION_BYTES_PER_NODE * batch_nodes
     )
 

@@ -249,7 +249,9 @@ def snapshot_graphs(
     else:
         keep = np.arange(len(snaps))
     check_memory(
-        graph_bytes(snaps.n_particles, keep.size, snaps.phi, settings.cutoff, params["size_ratio"]),
+        graph_bytes(
+            snaps.n_particles, keep.size, snaps.phi, settings.cutoff, params["size_ratio"], snaps.dim
+        ),
         f"{path}: the graphs of {keep.size} snapshot(s) of {snaps.n_particles} particles",
         "give fewer snapshots or particles per file (or a shorter graph.cutoff)",
     )

@@ -333,7 +333,12 @@ class Surrogate:
             raise InputError(f"{snaps.source}: holds no snapshot")
         check_memory(
             prediction_bytes(
-                snaps.n_particles, len(snaps), snaps.phi, self.settings.cutoff, snaps.params["size_ratio"]
+                snaps.n_particles,
+                len(snaps),
+                snaps.phi,
+                self.settings.cutoff,
+                snaps.params["size_ratio"],
+                snaps.dim,
             ),
             f"{snaps.source}: predicting {len(snaps)} snapshot(s) of {snaps.n_particles} particles",
             "split the snapshots over several files or calls",
