@@ -68,6 +68,9 @@ lint: install
 # simulate commands that regenerate its runs)
 cards: install
 	$(PY) -m rheograph.dataset_card data/paper --out docs
+	$(PY) -m rheograph.dataset_card data/flow_curves_3d --out docs/datasets/flow_curves_3d \
+	    --title "Dataset card: the 3D flow-curve set (in progress)" \
+	    --command "python simulate.py -m campaign=flow_curves_3d"
 	$(PY) -m rheograph.dataset_card data/jamming --out docs/datasets/jamming \
 	    --title "Dataset card: runs near jamming" \
 	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \

@@ -194,3 +194,13 @@ def test_the_top_level_names_are_listed_and_each_resolves_to_its_documented_obje
     api = (ROOT / "docs" / "reference" / "api.md").read_text()
     for name, obj in documented.items():
         assert f"::: {obj.__module__}.{name}" in api, f"{name} is missing from the API reference"
+
+
+def test_the_model_list_names_each_models_dimension(capsys):
+    """``predict.py --list-models``: every shipped model (written before 3D models existed) reads as 2D."""
+    from rheograph.learn.predict import main as predict_main
+    from rheograph.learn.registry import list_models
+
+    predict_main(["--list-models"])
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == len(list_models()) and all(": 2D, phi " in line for line in lines)

@@ -566,8 +566,8 @@ def main(argv=None) -> None:
         for name in list_models():
             card = read_card(model_paths(name)[0])
             d = card["domain"]
-            print(
-                f"{name}: phi {d['phi'][0]:g}-{d['phi'][1]:g}, sigma/sigma0 {d['stress'][0]:g}-"
+            print(  # model files written before 3D record no dimension: 2D
+                f"{name}: {d.get('dim', 2)}D, phi {d['phi'][0]:g}-{d['phi'][1]:g}, sigma/sigma0 {d['stress'][0]:g}-"
                 f"{d['stress'][1]:g}, N {d['n_particles']}, position noise {card['position_noise']} a"
             )
         return
