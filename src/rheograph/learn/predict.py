@@ -567,8 +567,9 @@ def main(argv=None) -> None:
             card = read_card(model_paths(name)[0])
             d = card["domain"]
             print(  # model files written before 3D record no dimension: 2D
-                f"{name}: {d.get('dim', 2)}D, phi {d['phi'][0]:g}-{d['phi'][1]:g}, sigma/sigma0 {d['stress'][0]:g}-"
-                f"{d['stress'][1]:g}, N {d['n_particles']}, position noise {card['position_noise']} a"
+                f"{name}: {d.get('dim', 2)}D, phi {d['phi'][0]:g}-{d['phi'][1]:g}, sigma/sigma0 "
+                f"{d['stress'][0]:g}-{d['stress'][1]:g}, N {d['n_particles']}, position noise "
+                f"{card['position_noise']} a"
             )
         return
     for name in ("models", "input", "out"):
