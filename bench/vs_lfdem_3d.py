@@ -170,28 +170,19 @@ def lfdem_series(data_path, st_path, stress: float, control: str) -> dict:
 def steady(series: dict, stress: float, control: str, rate: float, strain_min: float) -> dict:
     """Steady means with block errors; Pi / sigma with sigma the imposed stress (stress control) or the
     mean shear stress (rate control)."""
+    out = steady_state_summary(
+        series["strain"],
+        series["time"],
+        series["pressure"],
+        series["z_mu"],
+        series["z"],
+        stress,
+        strain_min,
+    )
     if control == "stress":
-        out = steady_state_summary(
-            series["strain"],
-            series["time"],
-            series["pressure"],
-            series["z_mu"],
-            series["z"],
-            stress,
-            strain_min,
-        )
         sigma, sigma_se = stress, 0.0
     else:
         # the same estimator with the shear stress in the place of the pressure gives <sigma_xy>
-        out = steady_state_summary(
-            series["strain"],
-            series["time"],
-            series["pressure"],
-            series["z_mu"],
-            series["z"],
-            stress,
-            strain_min,
-        )
         tau = steady_state_summary(
             series["strain"],
             series["time"],

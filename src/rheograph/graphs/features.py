@@ -115,16 +115,23 @@ def snapshot_pairs(positions, radii, lx, ly, le_offset, cutoff, params) -> dict:
     ``params`` is the run's parameter mapping (``delta`` and ``kn_coefficient`` are read)."""
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, le_offset, 0.0, cutoff)
     nvec, r, xi, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, le_offset)
+    return pair_records(radii, pair_i, pair_j, nvec, r, xi, cutoff, params)
+
+
+def pair_records(radii, pair_i, pair_j, nvec, r, xi, cutoff, params) -> dict:
+    """The per-pair geometry of ``snapshot_pairs`` (2D) and its 3D twin from candidate pairs and their
+    geometry: those with surface gap < ``cutoff`` kept, the normal's components ``nx``, ``ny`` (and
+    ``nz`` where ``nvec`` has three columns)."""
     keep = r - radii[pair_i] - radii[pair_j] < cutoff
     pair_i, pair_j, nvec, r, xi = pair_i[keep], pair_j[keep], nvec[keep], r[keep], xi[keep]
     abar = 0.5 * (radii[pair_i] + radii[pair_j])
+    normal = {name: nvec[:, k] for k, name in enumerate(("nx", "ny", "nz")[: nvec.shape[1]])}
     return {
         "i": pair_i,
         "j": pair_j,
         "xi": xi,
         "r": r,
-        "nx": nvec[:, 0],
-        "ny": nvec[:, 1],
+        **normal,
         "abar": abar,
         "overlap": np.maximum(-xi, 0.0) * abar / overlap_unit(float(params["kn_coefficient"])),
         "lub_gap": np.maximum(xi, 0.0) + float(params["delta"]),

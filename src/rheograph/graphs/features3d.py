@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from rheograph.errors import InputError
-from rheograph.graphs.features import RELAX_MAX_STEPS, Relaxation, _viscosity, overlap_unit
+from rheograph.graphs.features import RELAX_MAX_STEPS, Relaxation, _viscosity, overlap_unit, pair_records
 from rheograph.sim.contacts import SLIDE
 from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry
 from rheograph.sim.integrator3d import SimState3D, Simulation3D
@@ -76,21 +76,7 @@ def snapshot_pairs3d(positions, radii, box3, cutoff, params) -> dict:
     radii = np.asarray(radii, dtype=np.float64)
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, cutoff)
     nvec, r, xi, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
-    keep = r - radii[pair_i] - radii[pair_j] < cutoff
-    pair_i, pair_j, nvec, r, xi = pair_i[keep], pair_j[keep], nvec[keep], r[keep], xi[keep]
-    abar = 0.5 * (radii[pair_i] + radii[pair_j])
-    return {
-        "i": pair_i,
-        "j": pair_j,
-        "xi": xi,
-        "r": r,
-        "nx": nvec[:, 0],
-        "ny": nvec[:, 1],
-        "nz": nvec[:, 2],
-        "abar": abar,
-        "overlap": np.maximum(-xi, 0.0) * abar / overlap_unit(float(params["kn_coefficient"])),
-        "lub_gap": np.maximum(xi, 0.0) + float(params["delta"]),
-    }
+    return pair_records(radii, pair_i, pair_j, nvec, r, xi, cutoff, params)
 
 
 def contact_history3d(pairs: dict, contacts, n_particles: int, kn_coefficient: float) -> dict:
