@@ -417,7 +417,7 @@ class SurrogateModule(L.LightningModule):
         # which on_load_checkpoint replaces by an older model file's own
         record = upgraded_hparams({})["net"] if net is None else net_record(net)
         self.targets = TargetSpec.from_config(targets)
-        global_in = record["kwargs"].get("global_in") if net is not None else None  # None: placeholder
+        global_in = record["kwargs"].get("global_in") if net is not None else None  # None: not known yet
         if graph_inputs and global_in is not None and len(graph_inputs) != global_in:
             raise InputError(
                 f"graph_inputs={list(graph_inputs)} names {len(graph_inputs)} columns, "
