@@ -146,8 +146,12 @@ def test_shipping_under_a_taken_name_is_refused_and_replace_swaps_the_model_whol
     from rheograph.errors import InputError
     from rheograph.learn import registry
 
+    # a finished five-fold run: the committed run's records with the shipped model's weights
+    five_folds = tmp_path / "five_folds"
+    shutil.copytree(ROOT / "docs/results/pressure_on_spring/N400_phi0.76", five_folds)
+    for fold in sorted((registry.MODELS_DIR / "N400_phi0.76").glob("fold*.pt")):
+        shutil.copy(fold, five_folds / fold.name)
     monkeypatch.setattr(registry, "MODELS_DIR", tmp_path / "models")
-    five_folds = ROOT / "docs/results/pressure_on_spring/N400_phi0.76"
     registry.ship(five_folds, "m")
     assert len(list((tmp_path / "models/m").glob("fold*.pt"))) == 5
     one_fold = tmp_path / "run"  # the same run cut to its first fold, without an error model

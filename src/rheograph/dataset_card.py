@@ -25,6 +25,7 @@ from rheograph.analysis import (
 )
 from rheograph.errors import InputError, one_line_errors
 from rheograph.flowcurve import collect
+from rheograph.io.figures import save_png
 from rheograph.io.hdf5 import jammed_snapshots, read_run_info, read_snapshot_table, read_timeseries
 from rheograph.io.index import USABLE, build_index, write_index
 from rheograph.sim.params import SimParams
@@ -499,7 +500,7 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
         axes[3].set_title("×: arrested (jammed) packings; lines: steady means", fontsize=8)
         axes[0].legend(fontsize=8, markerscale=3)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_png(fig, path, dpi=100)
     plt.close(fig)
 
 
@@ -546,7 +547,7 @@ def plot_fig3(records: list[dict], path: Path) -> None:
             side.tick_params(labelleft=False)
             main.set_xlabel("Z_μ")
             main.set_ylabel("log10 η_r" if key == "viscosity" else "log10 Π/σ0")
-    fig.savefig(path, dpi=90)
+    save_png(fig, path, dpi=90)
     plt.close(fig)
 
 

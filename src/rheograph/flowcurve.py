@@ -25,6 +25,7 @@ import numpy as np
 from rheograph.analysis import steady_extras, steady_state_summary
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.configurations import DAMAGED_FILE_ERRORS
+from rheograph.io.figures import save_png
 from rheograph.io.hdf5 import is_trajectory, read_run_info, read_timeseries
 from rheograph.io.lfdem import read_lfdem_data
 from rheograph.sim.params import scheme_name
@@ -295,7 +296,7 @@ def plot(points, reference, out_png: Path) -> None:
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
     fig.tight_layout(rect=(0, 0.032 * rows + 0.01, 1, 1))
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_png, dpi=120)
+    save_png(fig, out_png, dpi=120)
     plt.close(fig)
 
 

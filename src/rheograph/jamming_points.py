@@ -28,6 +28,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from rheograph.errors import InputError, one_line_errors
+from rheograph.io.figures import save_png
 from rheograph.io.pages import replace_section
 
 FRICTIONLESS_Z_MU = 0.02  # a sigma <= 0.5 run below this frictional coordination is on the mu = 0 branch
@@ -473,7 +474,7 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
-    fig.savefig(path, dpi=130)
+    save_png(fig, path, dpi=130)
     plt.close(fig)
 
 

@@ -1,8 +1,7 @@
 """Shipped surrogate models: named ensembles of fold bundles with a model card, inside the package
 (``rheograph/models/<name>/``: ``fold*.pt``, ``error_model.json``, ``card.json``, ``card.md``).
 
-    python -m rheograph.learn.registry ship docs/results/pressure_on_spring/N400_phi0.76 \
-        --name N400_phi0.76 --replace
+    python -m rheograph.learn.registry ship outputs/train/<timestamp> --name my_model
     python predict.py --list-models
 
 ``ship`` makes a named model out of a training run directory: its fold bundles, completed where a run of

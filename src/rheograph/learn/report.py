@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rheograph.io.figures import save_png
 from rheograph.learn.module import TARGET_NAMES, fold_metrics
 
 LABELS = {"eta": "η_r", "pressure": "Π / σ0", "z_mu": "Z_μ"}
@@ -234,7 +235,7 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
                 axis.set_minor_formatter(NullFormatter())
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(run_dir / "parity.png", dpi=110)
+    save_png(fig, run_dir / "parity.png", dpi=110)
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
@@ -251,7 +252,7 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
             ax.set_ylabel(LABELS[t])
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(run_dir / "flow_curves.png", dpi=110)
+    save_png(fig, run_dir / "flow_curves.png", dpi=110)
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
@@ -266,7 +267,7 @@ def write_report(run_dir: Path, fold_results: list[dict], predictions: list[dict
         ax.set_xlabel(f"absolute error {LABELS[t]}")
         ax.set_ylabel("density")
     fig.tight_layout()
-    fig.savefig(run_dir / "mae_distribution.png", dpi=110)
+    save_png(fig, run_dir / "mae_distribution.png", dpi=110)
     plt.close(fig)
 
     # the figures in TensorBoard too, next to the scalars

@@ -387,7 +387,7 @@ def train_folds(cfg: DictConfig, run_dir: Path, fold_callbacks=None) -> dict:
         fold_results.append(result)
         predictions.append(prediction)
     stacked = _stack_predictions(predictions)
-    np.savez(run_dir / "test_predictions.npz", **stacked)
+    np.savez_compressed(run_dir / "test_predictions.npz", **stacked)
     if cfg.data.split != "random":  # held-out trajectories (or phi): residuals of unseen data only
         model = fit_error_model(
             stacked["pred"], stacked["true"], stacked["stress"], stacked["phi"], stacked["jammed"]
@@ -512,7 +512,7 @@ def save_finished_fold(run_dir: Path, k: int, result: dict, prediction: dict) ->
     """Written last, after the fold's bundle: its presence marks fold k as finished."""
     arrays = {key: value for key, value in prediction.items() if key != "baselines"}
     arrays.update({f"baseline_{name}": value for name, value in prediction.get("baselines", {}).items()})
-    np.savez(run_dir / f"fold{k}_predictions.npz", **arrays)
+    np.savez_compressed(run_dir / f"fold{k}_predictions.npz", **arrays)
     tmp = run_dir / f"fold{k}_result.json.tmp"
     tmp.write_text(json.dumps(result))
     tmp.replace(run_dir / f"fold{k}_result.json")
