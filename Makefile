@@ -42,7 +42,7 @@ demo: install
 	    sim.integrator=implicit sim.disp_max=2e-3 \
 	    output_root=outputs/demo/simulate
 	$(PY) train.py experiment=demo
-	$(PY) -m rheograph.flowcurve data/paper --out outputs/demo/flow_curve
+	$(PY) -m rheograph.analysis.flow_curves data/paper --out outputs/demo/flow_curve
 
 test: install
 	$(PY) -m pytest -q
@@ -67,11 +67,11 @@ lint: install
 # the dataset cards of the committed sets (tables and figures from the trajectory files; each quotes the
 # simulate commands that regenerate its runs)
 cards: install
-	$(PY) -m rheograph.dataset_card data/paper --out docs
-	$(PY) -m rheograph.dataset_card data/flow_curves_3d --out docs/datasets/flow_curves_3d \
+	$(PY) -m rheograph.analysis.dataset_card data/paper --out docs
+	$(PY) -m rheograph.analysis.dataset_card data/flow_curves_3d --out docs/datasets/flow_curves_3d \
 	    --title "Dataset card: the 3D flow-curve set (in progress)" \
 	    --command "python simulate.py -m campaign=flow_curves_3d"
-	$(PY) -m rheograph.dataset_card data/jamming --out docs/datasets/jamming \
+	$(PY) -m rheograph.analysis.dataset_card data/jamming --out docs/datasets/jamming \
 	    --title "Dataset card: runs near jamming" \
 	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \
 	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.82,0.83,0.835 sim.seed=1,2" \
@@ -84,7 +84,7 @@ cards: install
 	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.81 sim.seed=1" \
 	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.78,0.79 sim.seed=1,2" \
 	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.795 sim.seed=1"
-	$(PY) -m rheograph.dataset_card data/large_n --out docs/datasets/large_n \
+	$(PY) -m rheograph.analysis.dataset_card data/large_n --out docs/datasets/large_n \
 	    --title "Dataset card: large systems" \
 	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1 sim.n_particles=400,2000   # phi 0.76" \
 	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1   # N = 8000" \

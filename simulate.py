@@ -10,7 +10,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import hydra  # noqa: E402
 from omegaconf import DictConfig  # noqa: E402
 
-from rheograph.cli import register_resolvers, simulate_main  # noqa: E402
+from rheograph.cli.hydra_apps import register_resolvers, simulate_main  # noqa: E402
 from rheograph.errors import one_line_errors, run_hydra_app  # noqa: E402
 
 register_resolvers()

@@ -4,7 +4,7 @@ See README.md and conf/train.yaml."""
 import hydra
 from omegaconf import DictConfig
 
-from rheograph.cli import train_main
+from rheograph.cli.hydra_apps import train_main
 from rheograph.errors import one_line_errors, run_hydra_app
 
 

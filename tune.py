@@ -3,7 +3,7 @@
 import hydra
 from omegaconf import DictConfig
 
-from rheograph.cli import tune_main
+from rheograph.cli.hydra_apps import tune_main
 from rheograph.errors import one_line_errors, run_hydra_app
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from publishing import publish
 
-from rheograph.dataset_card import run_cpu_seconds
+from rheograph.analysis.dataset_card import run_cpu_seconds
 from rheograph.io.hdf5 import read_run_info
 from rheograph.io.index import read_index
 from rheograph.sim.params import scheme_name

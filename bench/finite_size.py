@@ -99,7 +99,7 @@ def arrest_table(points, phi: float) -> list[str]:
 
 
 def main(argv=None) -> int:
-    from rheograph.flowcurve import collect
+    from rheograph.analysis.flow_curves import state_points
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("directories", nargs="+", help="directories of trajectory files (searched recursively)")
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
     ap.add_argument("--arrest-phi", type=float, default=0.80, help="φ of the arrest table")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
-    points = collect(args.directories)
+    points = state_points(args.directories)
     lines = [
         f"Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at "
         f"{args.min_sizes} or more N; mean ± error over seeds and strain blocks; arrested runs counted, "

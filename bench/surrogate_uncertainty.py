@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 from publishing import publish
 from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
-from rheograph.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
+from rheograph.analysis.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
 from rheograph.io.snapshots import read_snapshots  # noqa: E402
 from rheograph.learn.error_model import error_scale  # noqa: E402
 from rheograph.learn.module import TARGET_NAMES, r2_score  # noqa: E402

@@ -454,7 +454,7 @@ def inference(args) -> list[dict]:
     decorrelated snapshot (median over every run of that phi and N)."""
     from torch_geometric.loader import DataLoader
 
-    from rheograph.dataset_card import cpu_seconds_per_decorrelated_snapshot
+    from rheograph.analysis.dataset_card import cpu_seconds_per_decorrelated_snapshot
     from rheograph.graphs.dataset import snapshot_graphs
 
     torch.set_num_threads(1)

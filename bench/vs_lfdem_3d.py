@@ -27,7 +27,7 @@ digits (its ``par_`` file at strain 0 and the first rows of ``data_`` and ``st_`
 
 Run.  Our run samples the shear rate, Pi, Z and Z_mu on the first step at or after each multiple of 0.01
 strain (LF_DEM writes exactly there), and the steady means over strain >= --steady are computed by the same
-estimator for both codes (``rheograph.analysis.steady_state_summary``: eta_r = sigma * elapsed time /
+estimator for both codes (``rheograph.analysis.steady.steady_state_summary``: eta_r = sigma * elapsed time /
 elapsed strain, strain-weighted means, 5 block standard errors).  Under rate control eta_r = <sigma_xy>/rate.
 CPU: ``time.process_time`` of this process over the steps after --warmup-strain (numba compilation and
 caches excluded); LF_DEM's CPU per strain is measured outside (its README).  Run it alone on one core:
@@ -55,7 +55,7 @@ for _var in (
 
 import numpy as np  # noqa: E402
 
-from rheograph.analysis import steady_state_summary  # noqa: E402
+from rheograph.analysis.steady import steady_state_summary  # noqa: E402
 from rheograph.sim.geometry3d import wrap_positions  # noqa: E402
 from rheograph.sim.integrator3d import SimState3D, Simulation3D  # noqa: E402
 from rheograph.sim.params3d import SimParams3D  # noqa: E402

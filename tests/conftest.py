@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="session")
 def tiny_files(tmp_path_factory):
     """Three tiny simulated state points (N = 64, phi = 0.72, sigma = 0.5, 5, 50), ~10 snapshots each."""
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     directory = tmp_path_factory.mktemp("tiny")

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rheograph.analysis import steady_state_summary
+from rheograph.analysis.steady import steady_state_summary
 from rheograph.io.lfdem import read_lfdem_data
 
 REFERENCE = Path(__file__).resolve().parent / "data" / "lfdem_phi0.76"  # LF_DEM output, see its README
@@ -69,7 +69,7 @@ def test_block_standard_error_of_uncorrelated_rows_is_the_textbook_one():
 
 
 def test_flow_curve_report_of_three_stresses_is_shear_thickening(tiny_files, tmp_path):
-    from rheograph.flowcurve import main
+    from rheograph.analysis.flow_curves import main
 
     main([str(Path(tiny_files[0]).parent), "--out", str(tmp_path)])
     table = (tmp_path / "flow_curves.md").read_text()
@@ -87,10 +87,10 @@ def test_flow_curve_pools_the_seeds_of_a_state_point_and_flags_an_unfinished_run
     its status listed."""
     import h5py
 
-    from rheograph.analysis import steady_state_summary
-    from rheograph.flowcurve import collect, markdown_table
+    from rheograph.analysis.flow_curves import markdown_table, state_points
+    from rheograph.analysis.steady import steady_state_summary
     from rheograph.io.hdf5 import read_timeseries
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     summaries = []
@@ -108,7 +108,7 @@ def test_flow_curve_pools_the_seeds_of_a_state_point_and_flags_an_unfinished_run
         summaries.append(
             steady_state_summary(ts["strain"], ts["time"], ts["pressure"], ts["z_mu"], ts["z"], 5.0, 0.05)
         )
-    (point,) = collect([tmp_path])
+    (point,) = state_points([tmp_path])
     assert point["n_seeds"] == 3 and point["statuses"] == ["completed", "wall_limit"]
     for key in ("viscosity", "pressure", "z_mu"):
         values = np.array([s[key] for s in summaries])
@@ -123,7 +123,7 @@ def test_flow_curve_pools_the_seeds_of_a_state_point_and_flags_an_unfinished_run
 
 def test_reference_steps_per_strain_from_the_mean_dt_column(tmp_path):
     """LF_DEM's column 23 is the mean dt of each output interval: steps = interval / mean dt."""
-    from rheograph.flowcurve import reference_points
+    from rheograph.analysis.flow_curves import reference_points
 
     strain = np.arange(0.0, 2.0001, 0.01)
     table = np.zeros((strain.size, 29))
@@ -139,8 +139,8 @@ def test_reference_steps_per_strain_from_the_mean_dt_column(tmp_path):
 
 
 def test_a_reference_folder_without_lfdem_data_is_refused_by_name(tmp_path):
+    from rheograph.analysis.flow_curves import reference_points
     from rheograph.errors import InputError
-    from rheograph.flowcurve import reference_points
 
     with pytest.raises(InputError, match="--reference .*nosuch: no such directory"):
         reference_points(tmp_path / "nosuch")
@@ -153,7 +153,7 @@ def test_a_reference_folder_without_lfdem_data_is_refused_by_name(tmp_path):
 
 def test_reference_step_counts_match_the_reference_readme():
     """README: 1.1e4 steps per strain at disp_max 2e-3 and 1.6e4 at 1e-3 (phi 0.76, sigma/sigma0 10)."""
-    from rheograph.flowcurve import reference_points
+    from rheograph.analysis.flow_curves import reference_points
 
     steps = {(p["stress"], p["disp_max"]): p["steps_per_strain"] for p in reference_points(REFERENCE, 0.0)}
     assert steps[(10.0, 2e-3)] == pytest.approx(1.1e4, rel=0.05)
@@ -166,9 +166,9 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "flow_curves" / "implicit"
 def test_jammed_state_points_report_the_static_packing_not_a_viscosity():
     """phi = 0.80, sigma/sigma0 = 50: two seeds shear-jammed, one before the steady window; the point has
     no viscosity, and the pressure and Z_mu of the seed that has a steady window."""
-    from rheograph.flowcurve import collect
+    from rheograph.analysis.flow_curves import state_points
 
-    (point,) = [p for p in collect([DATA]) if p["stress"] == 50.0]
+    (point,) = [p for p in state_points([DATA]) if p["stress"] == 50.0]
     assert point["jammed"] and point["n_seeds"] == 2
     assert np.isnan(point["viscosity"])
     assert 2.0 < point["pressure"] / point["stress"] < 2.2  # Pi_2D / sigma ~ 3.1, near isostatic packing
@@ -180,7 +180,7 @@ def test_a_seed_held_by_two_sweeps_counts_once_with_its_longer_run(tmp_path):
     the error bar for nothing.  The longer run stands for the seed."""
     import shutil
 
-    from rheograph.flowcurve import collect
+    from rheograph.analysis.flow_curves import state_points
     from rheograph.io.hdf5 import read_run_info
 
     run = "N400_phi0.76_s10_seed1_d0.002_implicit"
@@ -189,8 +189,8 @@ def test_a_seed_held_by_two_sweeps_counts_once_with_its_longer_run(tmp_path):
     for sweep in ("a", "b"):
         (tmp_path / sweep).mkdir()
         shutil.copy(source, tmp_path / sweep / "trajectory.h5")
-    (alone,) = collect([tmp_path / "a"])
-    (both,) = collect([tmp_path / "a", tmp_path / "b"])
+    (alone,) = state_points([tmp_path / "a"])
+    (both,) = state_points([tmp_path / "a", tmp_path / "b"])
     assert both["n_runs"] == both["n_seeds"] == 1
     for key in ("viscosity", "viscosity_se", "pressure", "z_mu"):
         assert both[key] == alone[key]
@@ -202,14 +202,14 @@ def test_slowest_shear_rate_is_the_minimum_over_the_flowing_seeds_steady_windows
     arrested seeds' rates fall to zero and do not count), below its mean rate sigma/eta_r."""
     import shutil
 
-    from rheograph.flowcurve import collect
+    from rheograph.analysis.flow_curves import state_points
     from rheograph.io.hdf5 import read_params, read_run_info, read_timeseries
 
     runs = sorted((DATA.parents[1] / "paper" / "multirun").glob("N400_phi0.8_s20_seed*_implicit"))
     for run in runs:
         (tmp_path / run.name).mkdir()
         shutil.copy(run / "trajectory.h5", tmp_path / run.name / "trajectory.h5")
-    (point,) = collect([tmp_path])
+    (point,) = state_points([tmp_path])
     flowing = [r / "trajectory.h5" for r in runs if read_run_info(r / "trajectory.h5")["status"] != "jammed"]
     assert point["n_jammed"] == 2 and len(flowing) == 1
     ts, params = read_timeseries(flowing[0]), read_params(flowing[0])
@@ -220,7 +220,7 @@ def test_slowest_shear_rate_is_the_minimum_over_the_flowing_seeds_steady_windows
 
 def test_decorrelation_strain_of_an_ar1_process_matches_its_closed_form():
     """AR(1) x_{k+1} = rho x_k + noise has autocorrelation rho^k: it crosses 1/e at lag -1/ln(rho)."""
-    from rheograph.analysis import decorrelation_strain
+    from rheograph.analysis.steady import decorrelation_strain
 
     rng = np.random.default_rng(0)
     rho, n, step = 0.9, 200_000, 0.01
@@ -235,7 +235,7 @@ def test_decorrelation_strain_of_an_ar1_process_matches_its_closed_form():
 
 
 def test_transient_strain_finds_the_end_of_a_relaxation():
-    from rheograph.analysis import transient_strain
+    from rheograph.analysis.steady import transient_strain
 
     rng = np.random.default_rng(1)
     strain = np.arange(0.0, 3.0, 0.01)
@@ -252,7 +252,7 @@ def test_ensemble_transient_resolves_drifts_below_one_runs_noise_and_rarely_inve
     would cancel) -- both resolved, the transient ending with the block [1, 1.5); counting from strain 1
     then biases a run's mean by 0.1 x 0.2 / 3.  Stationary ensembles report a transient in at most about
     ``alpha`` = 5 % of cases (Bonferroni bound; measured over 200 ensembles of 10 state points x 3 runs)."""
-    from rheograph.analysis import ensemble_transient
+    from rheograph.analysis.steady import ensemble_transient
     from rheograph.errors import InputError
 
     rng = np.random.default_rng(3)

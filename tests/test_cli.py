@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 
-from rheograph.cli import register_resolvers, simulate_main
+from rheograph.cli.hydra_apps import register_resolvers, simulate_main
 from rheograph.io.hdf5 import read_run_info
 from rheograph.sim.params import ParameterError, SimParams
 
@@ -103,7 +103,10 @@ def test_rheograph_command_runs_the_entry_points_outside_the_repository(tmp_path
 
     def run(*args):
         return subprocess.run(
-            [sys.executable, "-m", "rheograph.console", *args], cwd=tmp_path, capture_output=True, text=True
+            [sys.executable, "-m", "rheograph.cli.console", *args],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
         )
 
     simulate = run("simulate", "--cfg", "job")

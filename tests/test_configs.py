@@ -11,7 +11,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from rheograph.cli import register_resolvers
+from rheograph.cli.hydra_apps import register_resolvers
 from rheograph.errors import InputError
 from rheograph.sim.params3d import params_from_mapping
 

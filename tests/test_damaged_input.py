@@ -232,13 +232,13 @@ def test_train_on_a_trajectory_whose_params_are_not_json_ends_with_one_line(tiny
 
 
 def test_flowcurve_names_a_trajectory_whose_time_series_is_damaged(tiny_files, tmp_path):
-    from rheograph.flowcurve import collect
+    from rheograph.analysis.flow_curves import state_points
 
     shutil.copy(tiny_files[0], tmp_path / "a.h5")
     with h5py.File(tmp_path / "a.h5", "r+") as h5:
         del h5["timeseries/strain"]
     with pytest.raises(InputError, match="a.h5: cannot be read as a rheograph trajectory"):
-        collect([tmp_path])
+        state_points([tmp_path])
 
 
 # ---- model folders -----------------------------------------------------------------------------------

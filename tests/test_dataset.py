@@ -91,7 +91,7 @@ def test_each_complete_area_fraction_has_the_papers_snapshot_count(index):
 def test_snapshots_are_spaced_by_at_least_the_decorrelation_strain(index):
     """Issue #13 item 4: per (N, phi), the snapshot spacing is at least the median (over flowing runs) 1/e
     decorrelation strain of each instantaneous target, measured over the steady window as the card does."""
-    from rheograph.analysis import decorrelation_strain
+    from rheograph.analysis.steady import decorrelation_strain
 
     taus, spacing = defaultdict(list), defaultdict(set)
     for entry in index["runs"]:
@@ -115,7 +115,7 @@ def test_snapshots_are_spaced_by_at_least_the_decorrelation_strain(index):
 def test_jamming_onset_per_seed_names_what_is_still_open():
     """The card's onset per seed: the smallest jammed stress, or 'none up to' the largest completed one
     of *that seed*; an unfinished run below the onset is named instead of being read as flowing."""
-    from rheograph.dataset_card import jamming_onset
+    from rheograph.analysis.dataset_card import jamming_onset
 
     def runs(**status):
         return [{"stress": float(k[1:].replace("_", ".")), "status": v} for k, v in status.items()]
@@ -131,7 +131,7 @@ def test_jamming_onset_per_seed_names_what_is_still_open():
 
 
 def test_stall_start_is_where_the_trailing_slow_rows_begin():
-    from rheograph.analysis import stall_start
+    from rheograph.analysis.steady import stall_start
 
     strain = np.array([0.85, 0.86, 0.87, 0.88, 0.884, 0.884])
     assert stall_start(strain, [0, 1, 0, 0, 1, 1]) == 0.884
@@ -143,7 +143,7 @@ def test_stall_start_is_where_the_trailing_slow_rows_begin():
 def test_flow_curve_cell_reports_the_arrested_packing_instead_of_nan():
     """A state point whose seeds all arrested before the steady window has no steady means: the card
     shows 'jammed' for eta_r and the arrested snapshots' Pi, Z_mu (mean ± standard error), never 'nan'."""
-    from rheograph.dataset_card import flow_curve_cell
+    from rheograph.analysis.dataset_card import flow_curve_cell
 
     nan = float("nan")
     point = dict(n_particles=400, phi=0.8, stress=100.0, jammed=True)
@@ -163,7 +163,7 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
     """An unfinished run (committed with its checkpoint) is listed under *other* and its snapshots are
     left out of the snapshot counts, as the learning leaves them out; a flow-curve mean it enters is
     marked unfinished."""
-    from rheograph.dataset_card import card_markdown
+    from rheograph.analysis.dataset_card import card_markdown
 
     def record(stress, status, flowing, seed=1):
         return dict(
@@ -198,7 +198,7 @@ def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_s
     """Two state points x 3 seeds, runs to strain 4 whose log η_r sits 0.2 high until strain 1.2 (noise
     0.1 per row): the card's decorrelation row names the transient (end of the block [1, 1.5), below the
     reference window from 2) and the bias counting from strain 1 adds, 0.2 x 0.2 / 3 = +0.013."""
-    from rheograph.dataset_card import card_markdown
+    from rheograph.analysis.dataset_card import card_markdown
 
     rng = np.random.default_rng(0)
     strain = np.arange(0.0, 4.0, 0.01)
@@ -234,7 +234,7 @@ def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_s
 
 
 def test_the_card_keeps_area_fractions_apart_that_two_decimals_would_merge_and_marks_frictionless_runs():
-    from rheograph.dataset_card import series_label
+    from rheograph.analysis.dataset_card import series_label
 
     assert [series_label(phi, 0.5) for phi in (0.785, 0.7875, 0.79, 0.795, 0.8)] == [
         "0.785",
@@ -249,7 +249,7 @@ def test_the_card_keeps_area_fractions_apart_that_two_decimals_would_merge_and_m
 def test_thickening_is_named_only_from_two_flowing_stresses():
     """One flowing stress is no flow curve: neither continuous nor discontinuous.  A shear rate that
     falls while the stress rises is the S-shape; one that rises is continuous thickening."""
-    from rheograph.dataset_card import thickening_lines
+    from rheograph.analysis.dataset_card import thickening_lines
 
     def point(stress, eta):
         return dict(n_particles=400, phi=0.8, mu=0.5, stress=stress, viscosity=eta, jammed=False)

@@ -89,7 +89,7 @@ def tiny_params():
 def test_a_state_point_being_created_by_another_process_is_refused_by_name(tmp_path):
     """Two runs of one state point started at the same moment: the second to create the file is refused
     in one line (not an HDF5 traceback on the first one's half-made file), the first runs on."""
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
 
     path = tmp_path / "trajectory.h5"
     with open(tmp_path / "trajectory.h5.creating", "a") as held:  # the other process, creating it
@@ -104,7 +104,7 @@ def test_a_state_point_being_created_by_another_process_is_refused_by_name(tmp_p
 
 def test_a_file_made_meanwhile_by_another_process_is_not_overwritten(tmp_path):
     from rheograph.io.hdf5 import TrajectoryFile
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.integrator import Simulation
 
     path = tmp_path / "trajectory.h5"
@@ -189,7 +189,7 @@ def test_train_with_report_false_names_no_report(tmp_path, monkeypatch, caplog):
     from hydra import compose, initialize_config_module
 
     import rheograph.learn.train
-    from rheograph.cli import train_main
+    from rheograph.cli.hydra_apps import train_main
 
     summary = {"val/loss": 0.1, **{f"test/r2_{k}": 0.9 for k in ("log_eta", "log_pressure", "z_mu")}}
     monkeypatch.setattr(rheograph.learn.train, "train_folds", lambda cfg, run_dir: summary)

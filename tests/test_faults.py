@@ -97,12 +97,16 @@ def test_predict_on_a_file_that_is_not_hdf5(tmp_path):
 
 
 def test_collect_and_flowcurve_refuse_missing_directories(tmp_path):
-    code, out = run(["-m", "rheograph.collect", str(tmp_path / "absent"), "--out", "i.json"], tmp_path)
+    code, out = run(
+        ["-m", "rheograph.runs.sweep_index", str(tmp_path / "absent"), "--out", "i.json"], tmp_path
+    )
     assert_one_line_error(code, out, "absent", "does not exist")
-    code, out = run(["-m", "rheograph.dataset_card", str(tmp_path / "absent"), "--out", "d"], tmp_path)
+    code, out = run(
+        ["-m", "rheograph.analysis.dataset_card", str(tmp_path / "absent"), "--out", "d"], tmp_path
+    )
     assert_one_line_error(code, out, "absent", "does not exist")
     (tmp_path / "empty").mkdir()
-    code, out = run(["-m", "rheograph.flowcurve", str(tmp_path / "empty"), "--out", "f"], tmp_path)
+    code, out = run(["-m", "rheograph.analysis.flow_curves", str(tmp_path / "empty"), "--out", "f"], tmp_path)
     assert_one_line_error(code, out, "no rheograph trajectory")
 
 
@@ -211,7 +215,7 @@ def test_debug_flag_shows_the_traceback(tmp_path):
 
     env = {**os.environ, "RHEOGRAPH_DEBUG": "1"}
     done = subprocess.run(
-        [sys.executable, "-m", "rheograph.collect", str(tmp_path / "absent"), "--out", "i.json"],
+        [sys.executable, "-m", "rheograph.runs.sweep_index", str(tmp_path / "absent"), "--out", "i.json"],
         capture_output=True,
         text=True,
         cwd=tmp_path,

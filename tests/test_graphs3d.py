@@ -22,7 +22,7 @@ from rheograph.graphs.features3d import (
 )
 from rheograph.io.configurations import wrap_into_box3d
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values, write_bare
-from rheograph.runner import run_state_point
+from rheograph.runs.runner import run_state_point
 from rheograph.sim.contacts import NONE
 from rheograph.sim.integrator3d import SimState3D, Simulation3D
 from rheograph.sim.params3d import SimParams3D

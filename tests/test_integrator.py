@@ -487,10 +487,10 @@ def test_frictionless_flow_matches_lf_dem(tmp_path):
     combined block standard errors.  Measured: eta_r 42.3 +- 1.2, Pi, Z and eta_r 1.8-2.1 combined s.e.
     below LF_DEM for this seed (the three-seed mean to strain 5, 44.6 +- 0.9, is 0.5 s.e. off: section 1);
     a trajectory that round-off makes differ on another machine stays inside 3 s.e. by that spread."""
-    from rheograph.analysis import steady_state_summary
+    from rheograph.analysis.steady import steady_state_summary
     from rheograph.io.hdf5 import read_timeseries
     from rheograph.io.lfdem import read_lfdem_data
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
 
     path = tmp_path / "trajectory.h5"
     params = SimParams(n_particles=400, phi=0.76, stress=0.5, strain=3.0, disp_max=1e-3, seed=1)

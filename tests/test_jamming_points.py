@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rheograph.errors import InputError
-from rheograph.jamming_points import (
+from rheograph.analysis.jamming_points import (
     arrest_bracket,
     arrest_probability,
     bootstrap,
@@ -22,6 +21,7 @@ from rheograph.jamming_points import (
     plateau_branch,
     read_runs,
 )
+from rheograph.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 

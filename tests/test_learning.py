@@ -139,7 +139,7 @@ def test_dataset_cache_is_rebuilt_when_a_trajectory_grows(tiny_files, tmp_path):
     (new snapshots appended) gets a new cache with its new graphs, not the stale one."""
     import shutil
 
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     path = tmp_path / "run.h5"
@@ -394,7 +394,7 @@ def test_training_reduces_the_loss_and_bundles_round_trip(tiny_files, tmp_path):
             np.testing.assert_allclose(np.log10(pred / lower), expected[:, k], rtol=1e-6)
     # a state point of the training range is in the domain; phi = 0.76 at sigma = 400 is not, and says so
     assert result["in_domain"].mean() > 0.5
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     outside = tmp_path / "outside.h5"
@@ -558,7 +558,7 @@ def test_a_training_run_refuses_to_resume_on_changed_data(tiny_files, tmp_path):
     from rheograph.io.hdf5 import read_params
     from rheograph.io.snapshots import data_fingerprint
     from rheograph.learn.train import train_folds
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     copies = tmp_path / "data"
@@ -606,7 +606,7 @@ def test_folds_in_parallel_processes_match_sequential_folds(tiny_files, tmp_path
 
 def test_leave_one_phi_out_tests_exactly_one_area_fraction(tiny_files, tmp_path):
     from rheograph.errors import InputError
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     files = list(tiny_files)

@@ -18,7 +18,7 @@ from rheograph.errors import InputError
 from rheograph.io.hdf5 import read_params, read_run_info, read_timeseries
 from rheograph.io.snapshots import read_snapshots
 from rheograph.naming import run_name
-from rheograph.runner import run_state_point
+from rheograph.runs.runner import run_state_point
 from rheograph.sim import SimParams, Simulation
 from rheograph.sim.params import ParameterError
 from rheograph.sim.params3d import SimParams3D, params_from_mapping
@@ -230,13 +230,13 @@ def test_simulate_py_refuses_a_bad_radii_file_in_one_line(tmp_path):
 def test_flow_curves_keep_runs_of_other_radii_apart(tmp_path):
     """A polydisperse run at the state point of a bidisperse one is a different suspension: its own row,
     labelled by its radii, never pooled as another seed."""
-    from rheograph.flowcurve import collect, markdown_table
+    from rheograph.analysis.flow_curves import markdown_table, state_points
 
     (tmp_path / "runs").mkdir()
     for name, extra in (("bi", {}), ("poly", {"radii": "polydisperse", "polydispersity": 0.1})):
         params = SimParams(**{**TINY, "strain": 0.02, **extra})
         run_state_point(params, tmp_path / "runs" / f"{name}.h5", progress=False)
-    points = collect([tmp_path / "runs"])
+    points = state_points([tmp_path / "runs"])
     assert sorted(p["radii"] for p in points) == ["", "polydisperse 0.1"]
     assert all(p["n_runs"] == 1 for p in points)
     rows = markdown_table(points).splitlines()

@@ -14,7 +14,7 @@ from rheograph.io.hdf5 import (
     read_timeseries,
     respace_snapshots,
 )
-from rheograph.runner import run_state_point
+from rheograph.runs.runner import run_state_point
 from rheograph.sim.params import ParameterError, SimParams
 
 TINY = dict(
@@ -207,7 +207,7 @@ def test_finished_runs_are_compressed_at_rest_and_extend_like_raw_ones(tmp_path)
 def test_an_interrupted_run_compacted_for_committing_resumes_to_the_uninterrupted_run(tmp_path):
     """``collect --compress`` also compacts interrupted runs (committed between sessions); the resume
     writes the file raw again and continues: time series and snapshots equal an uninterrupted run's."""
-    from rheograph.collect import main as collect_main
+    from rheograph.runs.sweep_index import main as collect_main
 
     params = SimParams(**TINY)
     ref, cut = tmp_path / "ref" / "run.h5", tmp_path / "cut" / "run.h5"
@@ -229,12 +229,12 @@ def test_an_interrupted_run_compacted_for_committing_resumes_to_the_uninterrupte
 
 
 def test_a_run_respaced_and_extended_equals_a_run_at_the_coarser_spacing_from_the_start(tmp_path):
-    """``python -m rheograph.respace``: a finished run with snapshots every 0.03, thinned to every 0.06 and
-    extended at 0.06, holds the snapshots (strains, positions, targets, contact lists), time series and
-    checkpoint of a run made at 0.06 from the start; a spacing that is not a whole multiple of the file's,
-    and a jammed run, are refused by name, leaving the file as it was."""
+    """``python -m rheograph.runs.respace``: a finished run with snapshots every 0.03, thinned to every
+    0.06 and extended at 0.06, holds the snapshots (strains, positions, targets, contact lists), time
+    series and checkpoint of a run made at 0.06 from the start; a spacing that is not a whole multiple of
+    the file's, and a jammed run, are refused by name, leaving the file as it was."""
     from rheograph.errors import InputError
-    from rheograph.respace import main as respace_main
+    from rheograph.runs.respace import main as respace_main
 
     coarse = SimParams(**{**TINY, "snapshot_interval": 0.06, "strain": 0.2})
     ref, fine = tmp_path / "ref.h5", tmp_path / "fine.h5"
@@ -573,7 +573,7 @@ def test_sigterm_checkpoints_then_exits_and_the_run_resumes(tmp_path):
 
     path = tmp_path / "run.h5"
     code = (
-        "from rheograph.runner import run_state_point\n"
+        "from rheograph.runs.runner import run_state_point\n"
         "from rheograph.sim.params import SimParams\n"
         f"run_state_point(SimParams(n_particles=64, phi=0.74, stress=5.0, strain=50.0), {str(path)!r},"
         " progress=False)\n"
@@ -594,7 +594,7 @@ def test_sigterm_checkpoints_then_exits_and_the_run_resumes(tmp_path):
 
 
 def test_jam_window_counts_the_window_total_not_single_rows():
-    from rheograph.runner import first_jammed_row
+    from rheograph.runs.runner import first_jammed_row
 
     stress, eta_jam = 10.0, 1e5
     # flowing at eta = 1e3: rows of 0.01 strain every 1 time unit -> never jammed
@@ -617,7 +617,7 @@ def test_snapshots_are_labelled_jammed_from_the_first_row_of_the_detectors_windo
     intervals, i.e. starts jam_intervals rows earlier.  A snapshot taken inside the window's first
     interval shows the stalled packing (jammed); one taken before the window flowed."""
     from rheograph.io.hdf5 import jammed_snapshots
-    from rheograph.runner import first_jammed_row
+    from rheograph.runs.runner import first_jammed_row
 
     stress, eta_jam, intervals = 10.0, 1e5, 10
     t = np.arange(40.0)
@@ -638,7 +638,7 @@ def test_default_jam_window_replayed_on_the_committed_runs_flags_only_the_jammed
     """docs/benchmarks.md: the default window (10 rows), replayed on every committed trajectory, flags
     the phi = 0.80 runs that shear-jammed and none of the flowing ones (phi up to 0.80, sigma up to 200,
     eta_r up to ~800), whatever window each run was made with."""
-    from rheograph.runner import first_jammed_row
+    from rheograph.runs.runner import first_jammed_row
 
     defaults = SimParams.defaults()
     flagged, jammed, flowing = set(), set(), 0

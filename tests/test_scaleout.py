@@ -80,7 +80,7 @@ def test_submitit_local_launcher_runs_a_simulation(tmp_path):
 def test_slurm_launcher_config_composes():
     from hydra import compose, initialize_config_dir
 
-    from rheograph.cli import register_resolvers
+    from rheograph.cli.hydra_apps import register_resolvers
 
     register_resolvers()
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):

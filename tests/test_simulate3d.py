@@ -14,7 +14,7 @@ import pytest
 from rheograph.errors import InputError
 from rheograph.io.hdf5 import read_checkpoint, read_run_info, read_timeseries
 from rheograph.io.snapshots import read_snapshots
-from rheograph.runner import run_state_point
+from rheograph.runs.runner import run_state_point
 from rheograph.sim.integrator3d import SimState3D
 from rheograph.sim.params import ParameterError, SimParams
 from rheograph.sim.params3d import SimParams3D, params_from_mapping
@@ -268,14 +268,14 @@ def test_a_3d_model_refuses_a_2d_snapshot_in_one_line(trajectory_3d):
 
 
 def test_flow_curves_never_pool_2d_and_3d_runs(trajectory_3d, tmp_path):
-    from rheograph.flowcurve import collect, markdown_table
+    from rheograph.analysis.flow_curves import markdown_table, state_points
 
     three_d = SimParams3D(**TINY_3D)
     two_d = SimParams(**{k: v for k, v in TINY_3D.items() if k != "phi"}, phi=0.7)
     (tmp_path / "a").mkdir()
     Path(tmp_path / "a" / "3d.h5").write_bytes(trajectory_3d.read_bytes())
     run_state_point(two_d, tmp_path / "a" / "2d.h5", progress=False)
-    points = collect([tmp_path / "a"])
+    points = state_points([tmp_path / "a"])
     assert sorted(p["dim"] for p in points) == [2, 3]
     table = markdown_table(points).splitlines()
     row_3d = next(line for line in table if line.startswith(f"| {three_d.n_particles} (3D) | 0.5 |"))
@@ -321,7 +321,7 @@ def test_the_memory_estimate_of_a_3d_run_is_its_own(monkeypatch):
 def test_the_3d_preset_sets_every_3d_parameter_with_the_2d_physics():
     from hydra import compose, initialize_config_dir
 
-    from rheograph.cli import register_resolvers
+    from rheograph.cli.hydra_apps import register_resolvers
 
     register_resolvers()
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):

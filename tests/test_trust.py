@@ -76,11 +76,11 @@ def test_a_model_folder_carrying_its_own_module_cannot_make_the_loader_import_it
 
 
 def test_predict_refuses_a_model_folder_naming_its_own_module_in_one_line(tmp_path):
-    """``python -m rheograph.console predict`` (the current directory on the import path) from the folder
+    """``python -m rheograph.cli.console predict`` (the current directory on the import path) from the folder
     that holds the model folder: one line, exit status 1, and the folder's module never runs."""
     _, marker = evil_model_folder(tmp_path)
     done = subprocess.run(
-        [sys.executable, "-m", "rheograph.console", "predict", "--models", "evil_model"]
+        [sys.executable, "-m", "rheograph.cli.console", "predict", "--models", "evil_model"]
         + ["--input", "snapshot.npz", "--out", "p.csv"],
         capture_output=True,
         text=True,
@@ -229,7 +229,7 @@ def test_hydras_rerun_flag_which_unpickles_its_file_is_refused_in_one_line(tmp_p
     Hydra entry point refuses it before Hydra reads the file."""
     import pickle
 
-    from rheograph.console import _hydra_app
+    from rheograph.cli.console import _hydra_app
     from rheograph.errors import run_hydra_app
 
     marker, planted = tmp_path / "payload_ran", tmp_path / "config.pickle"
@@ -385,6 +385,6 @@ np.load(path)
 np.load(path, allow_pickle=False)
 yaml.load(text, Loader=yaml.SafeLoader)
 importlib.import_module(TOOLS[command])
-importlib.import_module("rheograph.cli")
+importlib.import_module("rheograph.cli.hydra_apps")
 """
     assert unsafe_reads(safe, "x.py") == []

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rheograph.analysis import steady_state_summary
+from rheograph.analysis.steady import steady_state_summary
 from rheograph.io.lfdem import read_lfdem_data
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,8 +46,8 @@ def _summary(strain, time, pressure, z_mu, z, stress):
 
 
 def pooled(runs: list[dict]) -> dict:
-    """Runs of one state point pooled as rheograph.flowcurve pools seeds: per key the mean over runs, the
-    error the larger of their spread / sqrt(n) and the propagated block errors."""
+    """Runs of one state point pooled as rheograph.analysis.flow_curves pools seeds: per key the mean over
+    runs, the error the larger of their spread / sqrt(n) and the propagated block errors."""
     out = {}
     for key in KEYS:
         values = np.array([r[key] for r in runs])
@@ -69,7 +69,7 @@ def lfdem_reference(paths, stress) -> dict:
 
 def ours(tmp_path, stress, seed=1, **scheme) -> dict:
     from rheograph.io.hdf5 import read_timeseries
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     params = SimParams(

@@ -18,13 +18,13 @@ from mkdocs.structure.files import File
 ROOT = Path(__file__).resolve().parents[2]
 CLIS = (
     ("predict.py", "rheograph.learn.predict"),
-    ("python -m rheograph.collect", "rheograph.collect"),
-    ("python -m rheograph.flowcurve", "rheograph.flowcurve"),
-    ("python -m rheograph.dataset_card", "rheograph.dataset_card"),
-    ("python -m rheograph.jamming_points", "rheograph.jamming_points"),
+    ("python -m rheograph.runs.sweep_index", "rheograph.runs.sweep_index"),
+    ("python -m rheograph.analysis.flow_curves", "rheograph.analysis.flow_curves"),
+    ("python -m rheograph.analysis.dataset_card", "rheograph.analysis.dataset_card"),
+    ("python -m rheograph.analysis.jamming_points", "rheograph.analysis.jamming_points"),
     ("python -m rheograph.learn.registry", "rheograph.learn.registry"),
-    ("python -m rheograph.respace", "rheograph.respace"),
-    ("rheograph", "rheograph.console"),
+    ("python -m rheograph.runs.respace", "rheograph.runs.respace"),
+    ("rheograph", "rheograph.cli.console"),
 )
 
 
@@ -32,7 +32,7 @@ def _composed(name: str) -> str:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from rheograph.cli import register_resolvers
+    from rheograph.cli.hydra_apps import register_resolvers
 
     register_resolvers()
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
@@ -155,7 +155,7 @@ def _key_table(name: str) -> list[str]:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from rheograph.cli import register_resolvers
+    from rheograph.cli.hydra_apps import register_resolvers
 
     register_resolvers()
     conf = ROOT / "conf"

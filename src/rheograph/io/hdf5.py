@@ -717,7 +717,7 @@ def jammed_snapshots(status: str, snapshot_strain, series_strain, jam_intervals:
     """(S,) bool: the snapshots of a run taken after its flow stopped.
 
     A run ends ``jammed`` when over its last ``jam_intervals`` output intervals -- between its last
-    ``jam_intervals`` + 1 rows -- the flow was together slower than the jam viscosity (rheograph.runner);
+    ``jam_intervals`` + 1 rows -- the flow was together slower than the jam viscosity (rheograph.runs.runner);
     the snapshots from the first row of that window on show the arrested packing (its Π and Z_μ are
     targets, its η_r is not), the earlier ones a flowing suspension.  All False for a run that did not
     jam."""

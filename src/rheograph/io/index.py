@@ -1,5 +1,5 @@
-"""The index of a sweep's trajectory files (one per job): what ``python -m rheograph.collect`` writes and
-training (``data.files=<dir>/index.json``) and the dataset card read.
+"""The index of a sweep's trajectory files (one per job): what ``python -m rheograph.runs.sweep_index``
+writes and training (``data.files=<dir>/index.json``) and the dataset card read.
 
 An index lists every rheograph trajectory under some directories with its parameters, status, strain and
 snapshot count, paths relative to the index file; training reads the listed files whose status is in

@@ -427,7 +427,8 @@ def split_files(split: dict, root: str | Path = ".") -> list[str]:
 
 
 def expand_files(files) -> list[str]:
-    """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.collect``) into a sorted list."""
+    """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.runs.sweep_index``) into a
+    sorted list."""
     from rheograph.io.index import index_files
 
     patterns = [files] if isinstance(files, str) else list(files)

@@ -46,7 +46,7 @@ def ensure_dataset(cfg: DictConfig) -> None:
     from hydra import compose
 
     from rheograph.naming import run_name
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
     from rheograph.sim.params import SimParams
 
     directory = Path(spec.directory)

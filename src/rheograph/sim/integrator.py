@@ -1,6 +1,6 @@
 """Time integration of the LF-DEM: one step = geometry -> CLM -> R_FU -> two solves -> shear rate from the
 stress target (stress control, the default) or the imposed rate (``control="rate"``) -> adaptive dt ->
-move.  No I/O here (see ``rheograph.runner``).
+move.  No I/O here (see ``rheograph.runs.runner``).
 
 Integrators:
 - ``euler``: explicit Euler as in LF_DEM; contact springs enter with their value at the start of the step.

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from rheograph.analysis import steady_extras, steady_state_summary
+from rheograph.analysis.steady import steady_extras, steady_state_summary
 from rheograph.errors import hdf5_write_found_no_room
 from rheograph.io.hdf5 import (
     TrajectoryFile,

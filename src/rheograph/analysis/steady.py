@@ -45,7 +45,7 @@ def steady_state_summary(
         return stress * (t[idx[-1]] - t[idx[0]]) / (s[idx[-1]] - s[idx[0]])
 
     # strain weights: each row stands for the strain to the next row, so rows written while the flow
-    # stalled (time-triggered, see rheograph.runner) do not outweigh the strain-sampled ones
+    # stalled (time-triggered, see rheograph.runs.runner) do not outweigh the strain-sampled ones
     w = np.clip(np.diff(s, append=s[-1] + np.median(np.diff(s))), 0.0, None)
     if w.sum() <= 0:
         w = np.ones_like(s)

@@ -2,10 +2,10 @@
 and the seed paper's Fig. 2 (targets of every snapshot against sigma and shear rate) and Fig. 3
 (densities of eta_r and Pi against Z_mu, with marginals).
 
-    python -m rheograph.dataset_card data/paper --out docs --min-strain 1.0
+    python -m rheograph.analysis.dataset_card data/paper --out docs --min-strain 1.0
 
 writes ``dataset.md`` (tables) and ``figures/dataset_fig2.png``, ``figures/dataset_fig3.png`` into --out,
-and ``index.json`` (``rheograph.collect``) into the data directory.
+and ``index.json`` (``rheograph.runs.sweep_index``) into the data directory.
 """
 
 from __future__ import annotations
@@ -17,14 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.analysis import (
+from rheograph.analysis.flow_curves import state_points
+from rheograph.analysis.steady import (
     decorrelation_strain,
     ensemble_transient,
     stall_start,
     transient_strain,
 )
 from rheograph.errors import InputError, one_line_errors
-from rheograph.flowcurve import collect
 from rheograph.io.figures import save_png
 from rheograph.io.hdf5 import jammed_snapshots, read_run_info, read_snapshot_table, read_timeseries
 from rheograph.io.index import USABLE, build_index, write_index
@@ -268,7 +268,7 @@ def card_markdown(
         "## Storage",
         "",
         "A run is written raw and, once finished, rewritten compact (`rheograph.io.hdf5.AT_REST`; "
-        "`python -m rheograph.collect DIR --out DIR/index.json --compress` converts files of older "
+        "`python -m rheograph.runs.sweep_index DIR --out DIR/index.json --compress` converts files of older "
         "versions): gzip + shuffle on everything; snapshot positions quantised to 1e-7 a (HDF5 "
         "scale-offset, error ≤ 5e-8 a, i.e. 10⁻⁴–10⁻³ of the 10⁻⁴–10⁻³ a overlaps that decide contacts; "
         "float32 would err by ~3e-6 a at the ~50 a coordinates of N = 2000, a few % of a small overlap); "
@@ -311,7 +311,7 @@ def card_markdown(
         "Transient: the strain after which 0.1-strain block means of log η_r stay within 2 standard "
         "deviations of the steady ones (searched below the steady window's start, so 1.0 means: not "
         "settled before it in that run).  Ensemble transient: one run cannot resolve a drift of a few per "
-        "cent, the runs of an (N, φ) together can (`rheograph.analysis.ensemble_transient`): per run, "
+        "cent, the runs of an (N, φ) together can (`rheograph.analysis.steady.ensemble_transient`): per run, "
         "0.5-strain block means of log η_r relative to its mean over the second half of its strain beyond "
         f"{min_strain:g}, in units of its standard deviation there; each block tested for a mean offset at "
         "any state point (F test against the scatter between seeds) or of one sign at all (t test over "
@@ -578,7 +578,7 @@ def main(argv=None) -> None:
     if not records:
         raise InputError(f"no rheograph trajectory under {data}")
     (out / "figures").mkdir(parents=True, exist_ok=True)
-    points = collect([data])
+    points = state_points([data])
     commands = "\n".join(args.command or PAPER_SET_COMMANDS)
     (out / "dataset.md").write_text(card_markdown(records, points, commands, args.min_strain, args.title))
     plot_fig2(records, points, out / "figures" / "dataset_fig2.png")
@@ -587,5 +587,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with one_line_errors("python -m rheograph.dataset_card"):
+    with one_line_errors("python -m rheograph.analysis.dataset_card"):
         main()

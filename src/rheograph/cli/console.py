@@ -19,10 +19,10 @@ import sys
 HYDRA_APPS = {"simulate": "simulate", "train": "train", "tune": "tune"}
 TOOLS = {
     "predict": "rheograph.learn.predict",
-    "collect": "rheograph.collect",
-    "flowcurve": "rheograph.flowcurve",
-    "dataset-card": "rheograph.dataset_card",
-    "jamming-points": "rheograph.jamming_points",
+    "collect": "rheograph.runs.sweep_index",
+    "flowcurve": "rheograph.analysis.flow_curves",
+    "dataset-card": "rheograph.analysis.dataset_card",
+    "jamming-points": "rheograph.analysis.jamming_points",
     "models": "rheograph.learn.registry",
 }
 
@@ -31,13 +31,17 @@ def _hydra_app(name: str):
     import hydra
     from omegaconf import DictConfig
 
-    from rheograph import cli
+    from rheograph.cli import hydra_apps
     from rheograph.errors import one_line_errors
 
-    cli.register_resolvers()
-    run = {"simulate": cli.simulate_main, "train": cli.train_main, "tune": cli.tune_main}[name]
+    hydra_apps.register_resolvers()
+    run = {
+        "simulate": hydra_apps.simulate_main,
+        "train": hydra_apps.train_main,
+        "tune": hydra_apps.tune_main,
+    }[name]
 
-    @hydra.main(version_base="1.3", config_path="conf", config_name=HYDRA_APPS[name])
+    @hydra.main(version_base="1.3", config_path="../conf", config_name=HYDRA_APPS[name])
     def app(cfg: DictConfig):
         with one_line_errors(f"rheograph {name}"):
             return run(cfg)

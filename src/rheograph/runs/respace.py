@@ -1,6 +1,6 @@
 """Thin the snapshots of finished runs to a coarser spacing, so that they can be extended at it.
 
-    python -m rheograph.respace 'data/paper/multirun/N2000_phi0.7_*/trajectory.h5' --interval 0.2
+    python -m rheograph.runs.respace 'data/paper/multirun/N2000_phi0.7_*/trajectory.h5' --interval 0.2
     python simulate.py ... sim.snapshot_interval=0.2 sim.strain=5      # then extend them
 
 A run is deterministic and its snapshots do not act on the dynamics, so a run respaced to a whole
@@ -36,5 +36,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with one_line_errors("python -m rheograph.respace"):
+    with one_line_errors("python -m rheograph.runs.respace"):
         main()

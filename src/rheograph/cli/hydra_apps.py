@@ -126,7 +126,7 @@ def simulate_main(cfg: DictConfig) -> dict:
     from hydra.types import RunMode
 
     from rheograph.errors import InputError, StatePointError
-    from rheograph.runner import run_state_point
+    from rheograph.runs.runner import run_state_point
 
     try:
         params = checked_simulate_config(cfg)

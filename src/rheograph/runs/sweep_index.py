@@ -1,6 +1,6 @@
 """Index the trajectory files of a sweep (one file per job) for training and bookkeeping.
 
-    python -m rheograph.collect outputs/simulate/multirun --out data/index.json
+    python -m rheograph.runs.sweep_index outputs/simulate/multirun --out data/index.json
 
 The index (``rheograph.io.index``) lists every rheograph trajectory under the given directories with its
 parameters, status, strain and snapshot count; ``data.files=data/index.json`` trains on the listed files
@@ -59,5 +59,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with one_line_errors("python -m rheograph.collect"):
+    with one_line_errors("python -m rheograph.runs.sweep_index"):
         main()

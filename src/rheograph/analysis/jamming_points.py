@@ -1,6 +1,6 @@
 """Where the suspension jams: the frictionless and frictional jamming area fractions from steady flow.
 
-    python -m rheograph.jamming_points data/paper/index.json data/jamming/index.json \\
+    python -m rheograph.analysis.jamming_points data/paper/index.json data/jamming/index.json \\
         --out docs/jamming.md --figure docs/figures/phase_diagram.png
 
 Two fits of the steady relative viscosity of every finished trajectory (``summary/viscosity``, strain
@@ -47,7 +47,7 @@ def read_runs(index_paths) -> list[dict]:
             index = json.loads(Path(path).read_text())
         except (OSError, ValueError) as exc:
             raise InputError(
-                f"{path}: not a readable run index ({exc}); make one with rheograph.collect"
+                f"{path}: not a readable run index ({exc}); make one with rheograph.runs.sweep_index"
             ) from exc
         for entry in index.get("runs", []):
             p, s = entry["params"], entry.get("summary") or {}
@@ -480,7 +480,7 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("indexes", nargs="+", help="run indexes (python -m rheograph.collect)")
+    ap.add_argument("indexes", nargs="+", help="run indexes (python -m rheograph.runs.sweep_index)")
     ap.add_argument(
         "--out", help="markdown file whose <!-- jamming_fits:start/end --> section gets the table"
     )
@@ -496,7 +496,9 @@ def main(argv=None) -> None:
     rows = jamming_table(runs, args.seed, args.window)
     if not rows:
         raise InputError(f"{args.indexes}: no branch with three area fractions of flowing runs to fit")
-    command = "python -m rheograph.jamming_points " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "python -m rheograph.analysis.jamming_points " + " ".join(
+        argv if argv is not None else sys.argv[1:]
+    )
     text = markdown(rows, command)
     print(text)
     if args.out:
@@ -506,5 +508,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with one_line_errors("python -m rheograph.jamming_points"):
+    with one_line_errors("python -m rheograph.analysis.jamming_points"):
         main()

@@ -1,7 +1,8 @@
 """Flow curves (eta_r, Pi, Z_mu vs sigma) from a directory of trajectory files, optionally against
 LF_DEM reference data.
 
-    python -m rheograph.flowcurve data/flow_curves --out docs --reference data/lfdem_reference/lfdem_phi0.76
+    python -m rheograph.analysis.flow_curves data/flow_curves --out docs \
+        --reference data/lfdem_reference/lfdem_phi0.76
 
 writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled: the
 value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the propagated
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.analysis import steady_extras, steady_state_summary
+from rheograph.analysis.steady import steady_extras, steady_state_summary
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.configurations import DAMAGED_FILE_ERRORS
 from rheograph.io.figures import save_png
@@ -36,7 +37,7 @@ KEYS = ("viscosity", "pressure", "z_mu", "z")
 PARTIAL_OR_DONE = ("completed", "wall_limit", "interrupted")
 
 
-def collect(directories) -> list[dict]:
+def state_points(directories) -> list[dict]:
     """One entry per state point (n, phi, stress, mu, disp_max, integrator[-lagged]), seeds pooled.
 
     A seed counts once: where several files hold the same start (a longer rerun of it, in another
@@ -307,7 +308,7 @@ def main(argv=None) -> None:
     ap.add_argument("--reference", help="directory of LF_DEM data_*.dat files to compare with")
     args = ap.parse_args(argv)
     reference = reference_points(args.reference) if args.reference else []
-    points = collect(args.directories)
+    points = state_points(args.directories)
     if not points:
         raise InputError(f"no rheograph trajectory files under {args.directories}")
     out = Path(args.out)
@@ -320,5 +321,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with one_line_errors("python -m rheograph.flowcurve"):
+    with one_line_errors("python -m rheograph.analysis.flow_curves"):
         main()
