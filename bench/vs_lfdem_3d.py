@@ -236,8 +236,13 @@ def make_simulation(conf: dict, args) -> Simulation3D:
     return Simulation3D(params, state=state)
 
 
-def strain_zero_check(sim: Simulation3D, par: dict, lf: dict, n: int) -> tuple[dict, list[str]]:
-    """One step of ours from the start against LF_DEM's strain-0 outputs."""
+def strain_zero_check(
+    sim: Simulation3D, par: dict, lf: dict, n: int, angular_unit: float = 1.0
+) -> tuple[dict, list[str]]:
+    """One step of ours from the start against LF_DEM's strain-0 outputs.  ``angular_unit`` converts the
+    ``par_`` file's angular velocities to σ0 units: LF_DEM writes them unconverted, in its internal unit,
+    which under rate control is the imposed rate (its Simulation.cpp, "angular velocity" written with unit
+    "none"; the translational velocities are converted)."""
     s = sim.state
     start = s.positions.copy()
     res = sim.step(record=True)
@@ -249,7 +254,7 @@ def strain_zero_check(sim: Simulation3D, par: dict, lf: dict, n: int) -> tuple[d
     w_total[:, 2] += -0.5 * rate
     lf_pos = lfdem_to_ours(par["position"])
     lf_u = lfdem_to_ours(par["velocity"])
-    lf_w = lfdem_to_ours(par["angular"])
+    lf_w = angular_unit * lfdem_to_ours(par["angular"])
     lf_sigma = np.array([sign * lf["stress_tensor"][0, k] for k, sign in LF_ST_TO_OURS])
     ours_sigma = res.stress
 
@@ -376,7 +381,8 @@ def main(argv=None) -> int:
     par_path = args.par or data_path.with_name(data_path.name.replace("data_", "par0_", 1))
     t0 = time.process_time()
     if par_path.exists():
-        check, problems = strain_zero_check(sim, read_first_par(par_path), lf, n)
+        angular_unit = args.rate if args.control == "rate" else 1.0
+        check, problems = strain_zero_check(sim, read_first_par(par_path), lf, n, angular_unit)
     else:  # without the particle file: the first shear rate and stress only
         check, problems = strain_zero_check_rate_only(sim, lf)
     check["cpu_first_step_s"] = time.process_time() - t0
