@@ -1,7 +1,7 @@
 """What an arrested packing costs to simulate, and why: continue shear-jammed runs from their checkpoints
 for a few steps and measure the step, the shear rate and the contacts step by step.
 
-    python bench/arrest_chatter.py [FILES ...] [--steps 40] [--no-write]
+    python -m bench.arrest_chatter [FILES ...] [--steps 40] [--no-write]
 
 Default files: the shear-jammed runs of data/paper (status ``jammed``, checkpoint kept).  Under stress
 control an arrested packing does not come to rest in the simulation: the shear rate changes sign from one
@@ -28,8 +28,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
-from publishing import publish
 
+from bench.publishing import publish
 from rheograph.io.hdf5 import read_checkpoint, read_run_info  # noqa: E402
 from rheograph.sim.integrator import Simulation, particle_pressure  # noqa: E402
 
@@ -111,7 +111,7 @@ def main() -> None:
         results.append(result)
         print(path, {k: result[k] for k in ("dt", "mean_rate", "rms_rate", "sign_changes")}, flush=True)
     shown = " ".join(os.path.relpath(f, ROOT) for f in args.files) if args.files else ""
-    command = f"python bench/arrest_chatter.py {shown} --steps {args.steps}".replace("  ", " ")
+    command = f"python -m bench.arrest_chatter {shown} --steps {args.steps}".replace("  ", " ")
     publish("arrest_chatter", render(results, command), write=not args.no_write)
 
 

@@ -1,7 +1,7 @@
 """Campaign cost: CPU seconds per unit strain of every committed run, per (N, φ, σ), and the CPU hours a
 full grid costs, so that the size of the dataset can be planned.
 
-    python bench/campaign_cost.py [--index data/paper/index.json] \\
+    python -m bench.campaign_cost [--index data/paper/index.json] \\
         [--extra 'data/scheme_phi080/*/trajectory.h5']
 
 CPU seconds are what each run recorded (``summary/cpu_seconds``: process CPU time over all invocations,
@@ -19,8 +19,8 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from publishing import publish
 
+from bench.publishing import publish
 from rheograph.analysis.dataset_card import run_cpu_seconds
 from rheograph.io.hdf5 import read_run_info
 from rheograph.io.index import read_index
@@ -137,7 +137,7 @@ def main() -> None:
     rows = dataset_rows(ROOT / args.index)
     extra = extra_rows(str(ROOT / args.extra)) if args.extra else []
     command = (
-        "python bench/campaign_cost.py --index "
+        "python -m bench.campaign_cost --index "
         + args.index
         + (f" --extra '{args.extra}'" if args.extra else "")
     )

@@ -2,7 +2,7 @@
 the default).  Times the numeric factorisation of one resistance matrix captured from a
 flowing run, the two hand-overs alternating, and checks that their solutions agree bit for bit.
 
-    OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python bench/cholmod_handover.py [--n 400 2000]
+    OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python -m bench.cholmod_handover [--n 400 2000]
 
 φ = 0.76, σ/σ0 = 10, implicit scheme at disp_max 2e-3 (the dataset's), matrix taken after --warmup steps.
 Prints a markdown table (medians over --repeats alternating batches of --batch factorisations).

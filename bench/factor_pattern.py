@@ -1,7 +1,7 @@
 """What do the Verlet skin's explicit zeros and the symbolic analysis cost the factorisation?  (Can the
 symbolic analysis be reused across Verlet-list rebuilds?)
 
-    OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python bench/factor_pattern.py [--n 400 2000]
+    OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python -m bench.factor_pattern [--n 400 2000]
 
 The resistance matrix keeps one 3x3 block for every pair of the neighbour list (cut-off + skin), so that
 its sparsity pattern and CHOLMOD's symbolic analysis (nested-dissection ordering, supernodes) live until
@@ -28,9 +28,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")
 
 import numpy as np  # noqa: E402
-from publishing import publish
 from sksparse import cholmod  # noqa: E402
 
+from bench.publishing import publish
 from rheograph.sim.integrator import Simulation  # noqa: E402
 from rheograph.sim.params import SimParams  # noqa: E402
 from rheograph.sim.solver import CholmodSolver  # noqa: E402
@@ -153,7 +153,7 @@ def main(argv=None) -> None:
             f"{100 * analysis_share:.1f} % | {100 * zeros_share:.1f} % |"
         )
         print(lines[-1], flush=True)
-    lines += ["", "Command: `python bench/factor_pattern.py --n " + " ".join(map(str, args.n)) + "`"]
+    lines += ["", "Command: `python -m bench.factor_pattern --n " + " ".join(map(str, args.n)) + "`"]
     publish("factor_pattern", "\n".join(lines), not args.no_write)
 
 

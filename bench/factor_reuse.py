@@ -1,7 +1,7 @@
 """Can a recent Cholesky factor replace a fresh one?  Conjugate gradients on each step's resistance matrix,
 preconditioned with the factor of an earlier step, against the direct solve .
 
-    OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python bench/factor_reuse.py [--n 400 2000] [--lags 1 2 5 10]
+    OPENBLAS_NUM_THREADS=1 OMP_THREAD_LIMIT=1 python -m bench.factor_reuse [--n 400 2000] [--lags 1 2 5 10]
 
 The simulation itself runs with the exact per-step factorisation (its trajectory is unaffected); at every
 step, for each refactorisation interval L, a shadow CHOLMOD factor refreshed every L steps preconditions
@@ -26,9 +26,9 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")
 
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
-from publishing import publish
 from scipy.sparse.linalg import LinearOperator, cg  # noqa: E402
 
+from bench.publishing import publish
 from rheograph.sim.integrator import Simulation  # noqa: E402
 from rheograph.sim.params import SimParams  # noqa: E402
 from rheograph.sim.solver import CholmodSolver  # noqa: E402
@@ -173,7 +173,7 @@ def main() -> None:
         )
     lines += [
         "",
-        "Command: `python bench/factor_reuse.py " + " ".join(sys.argv[1:]).replace(" --no-write", "") + "`",
+        "Command: `python -m bench.factor_reuse " + " ".join(sys.argv[1:]).replace(" --no-write", "") + "`",
     ]
     publish("factor_reuse", "\n".join(lines), write=not args.no_write)
 

@@ -1,7 +1,7 @@
 """Why a step costs more per particle in a larger box: the sparse Cholesky factor of the resistance
 matrix, per N, on the matrix of a flowing configuration.
 
-    python bench/factor_scaling.py --n 400 2000 8000 20000 --page jamming.md
+    python -m bench.factor_scaling --n 400 2000 8000 20000 --page jamming.md
 
 Per N: a φ = 0.76, σ/σ0 = 200 run (implicit, disp_max 2e-3) is stepped past its start-up (``--warmup``
 steps), then its current matrix is analysed (CHOLMOD, nested dissection, supernodal: the simulator's
@@ -26,8 +26,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
-from publishing import command_line, publish
 
+from bench.publishing import command_line, publish
 from rheograph.sim import SimParams, Simulation  # noqa: E402
 from rheograph.sim.params import scheme_settings  # noqa: E402
 

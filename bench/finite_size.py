@@ -1,7 +1,7 @@
 """Finite-size effects: the steady η_r, Π and Z_μ of the same state points at N = 400 … 20 000, and how
 often a run arrests (shear-jams) at each N.
 
-    python bench/finite_size.py data/paper/multirun data/large_n/multirun
+    python -m bench.finite_size data/paper/multirun data/large_n/multirun
 
 Every state point (φ, μ, σ/σ0, disp_max, scheme) simulated at ``--min-sizes`` or more N is a row per
 N, with the slowest shear rate its flowing runs recorded: seeds pooled as in the flow curves (mean;
@@ -18,8 +18,9 @@ import sys
 from collections import defaultdict
 
 import numpy as np
-from publishing import command_line, publish
 from scipy.stats import binomtest
+
+from bench.publishing import command_line, publish
 
 
 def fmt(value: float, se: float) -> str:

@@ -1,8 +1,8 @@
 """Training and prediction on a GPU against the CPU, in one run: JSON results, a table for the docs.
 
-    PYTHONPATH=src python bench/gpu.py --device cuda --out gpu.json        # about 6 min on one GPU
-    PYTHONPATH=src python bench/gpu.py --device cpu --quick --out q.json   # a smoke run of every part
-    PYTHONPATH=src python bench/gpu_report.py gpu.json                    # the markdown table
+    PYTHONPATH=src python -m bench.gpu --device cuda --out gpu.json        # about 6 min on one GPU
+    PYTHONPATH=src python -m bench.gpu --device cpu --quick --out q.json   # a smoke run of every part
+    PYTHONPATH=src python -m bench.gpu_report gpu.json                    # the markdown table
 
 All on the committed φ = 0.76, N = 400 set with ``experiment=demo`` settings (width 32, 60 epochs, five
 folds of held-out trajectories); the graph cache is built first, into a fresh directory, and timed on

@@ -1,6 +1,6 @@
 """How much of a snapshot's η_r, Π, Z_μ do positions + σ leave unexplained that the contact history holds?
 
-    python bench/history_information.py --phi 0.70 0.76
+    python -m bench.history_information --phi 0.70 0.76
 
 The instantaneous η_r of a snapshot is fixed by the positions, the imposed stress *and* the tangential
 springs' stretches (history the positions do not record).  Gradient-boosted trees (the project's
@@ -26,8 +26,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from publishing import publish
 
+from bench.publishing import publish
 from rheograph.graphs.features import snapshot_descriptors, snapshot_pairs, solve_viscosity
 from rheograph.learn.module import r2_score
 from rheograph.sim.geometry import pair_geometry
@@ -161,7 +161,7 @@ def main(argv=None) -> None:
             for phi, by_stress in gaps.items()
         ),
         "",
-        f"Command: `python bench/history_information.py --phi {' '.join(map(str, args.phi))}`",
+        f"Command: `python -m bench.history_information --phi {' '.join(map(str, args.phi))}`",
     ]
     publish("history_information", "\n".join(lines), write=not args.no_write)
 

@@ -1,7 +1,7 @@
 """What a larger box costs: CPU per particle-step, peak memory, Cholesky fill and output size per run,
 against N, from finished (or checkpointed) runs at the same state points, all from one machine.
 
-    python bench/large_n.py data/paper/multirun data/large_n/multirun --phi 0.76
+    python -m bench.large_n data/paper/multirun data/large_n/multirun --phi 0.76
 
 Per run: CPU seconds and steps recorded in the trajectory (``summary/cpu_seconds``, ``summary/steps``;
 for a run still going, its last checkpoint's counters), the peak resident memory of the process that
@@ -21,7 +21,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import command_line, publish
 
 
 def run_cost(path: Path) -> dict | None:

@@ -2,7 +2,7 @@
 positions), scored against LF_DEM's own η_r, Π and Z_μ, beside the physics-only rows; and the cost of
 predicting 1000 snapshots.
 
-    python bench/lfdem_snapshots.py --runs /work/lfdem_runs/s*/par_*.dat --model N400_phi0.76
+    python -m bench.lfdem_snapshots --runs /work/lfdem_runs/s*/par_*.dat --model N400_phi0.76
 
 The LF_DEM runs are made outside the project (bench/vs_lfdem.py says how to build LF_DEM; configuration
 output every 0.1 strain, ``out_data_particle`` and ``out_data_interaction`` on).  Snapshots at strain >= 1
@@ -15,7 +15,7 @@ With ``--noise ε`` Gaussian noise of ε per coordinate [a] (seeded, ``--seed``)
 positions and declared to the model with the rounding (``position_noise`` = √(rounding² + ε²)): an
 imaging model on snapshots of a code it was never trained on.
 
-    python bench/lfdem_snapshots.py --runs ... --model N400_phi0.76_imaging --noise 0.01 \
+    python -m bench.lfdem_snapshots --runs ... --model N400_phi0.76_imaging --noise 0.01 \
         --section lfdem_snapshots_imaging
 """
 
@@ -28,8 +28,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
-from zero_shot_n import lookup_mean  # noqa: E402
+
+from bench.publishing import command_line, publish
+from bench.zero_shot_n import lookup_mean  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

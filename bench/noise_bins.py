@@ -7,7 +7,7 @@ the physics-only row — within bins of ε.  Nothing is relaxed or predicted aga
 snapshots cost a relaxation each (graph.relax_strain) gets its by-ε table without that cost; every
 predictor in a bin is scored on the same rows.
 
-    python bench/noise_bins.py docs/results/imaging/N2000_phi0.80_relaxed
+    python -m bench.noise_bins docs/results/imaging/N2000_phi0.80_relaxed
 
 The cache is the one training built (data/cache); where it is absent it is rebuilt first, at the cost
 of that build.  Results replace the marked section (``--section``) of ``--page`` unless ``--no-write``.
@@ -21,7 +21,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import command_line, publish
 
 ROOT = Path(__file__).resolve().parents[1]
 # saved prediction arrays and the names the result tables give them

@@ -15,10 +15,12 @@ RECORDS = ROOT / "docs" / "results" / "bench"
 
 
 def command_line(script: str, argv=None) -> str:
-    """``python bench/<script> ARGS`` as the user typed it (``argv``, or the process's), less
-    ``--no-write``: the command that reproduces a published section."""
+    """``python -m bench.<script> ARGS`` as the user typed it (``argv``, or the process's), less
+    ``--no-write``: the command that reproduces a published section (``script`` with or without
+    its ``.py``)."""
     args = argv if argv is not None else sys.argv[1:]
-    return f"python bench/{script} {shlex.join([a for a in args if a != '--no-write'])}".rstrip()
+    module = script.removesuffix(".py")
+    return f"python -m bench.{module} {shlex.join([a for a in args if a != '--no-write'])}".rstrip()
 
 
 def publish(

@@ -11,7 +11,7 @@ correction to the value starts from) — next to the one-solve of the positions 
 (springs unstretched, the ``solve_viscosity`` input) and the lookup of the mean at (φ, σ) over the other
 trajectories given at that state point (seeds not sampled).
 
-    python bench/relaxation_observables.py 'data/paper/multirun/N400_phi0.76_*_seed[12]_*/trajectory.h5' \\
+    python -m bench.relaxation_observables 'data/paper/multirun/N400_phi0.76_*_seed[12]_*/trajectory.h5' \\
         --lookup 'data/paper/multirun/N400_phi0.76_*_seed3_*/trajectory.h5'
 
 Results replace the marked section (``--section``) of docs/benchmarks.md unless ``--no-write``.
@@ -27,7 +27,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import command_line, publish
 
 
 def relaxation_path(path: str, every: int, noises, max_strain: float, solve_at: float, seed: int) -> list:

@@ -1,8 +1,8 @@
 """Simulator speed: wall and CPU seconds per unit strain, per particle-step, with a per-phase breakdown,
 at phi = 0.76, sigma/sigma0 = 10 (the LF_DEM reference point) for several N and disp_max.
 
-    python bench/simulate_speed.py                      # N = 400, 1000, 2000; disp_max 2e-3, 1e-3
-    python bench/simulate_speed.py --n 400 --disp 2e-3  # a subset
+    python -m bench.simulate_speed                      # N = 400, 1000, 2000; disp_max 2e-3, 1e-3
+    python -m bench.simulate_speed --n 400 --disp 2e-3  # a subset
 
 Each case is warmed up (past the frictionless start-up transient, numba compiled) and then timed over
 ``--windows`` consecutive strain windows; medians are reported.  Results replace the marked section of
@@ -20,8 +20,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
-from publishing import replace_section
 
+from bench.publishing import replace_section
 from rheograph.sim import SimParams, Simulation  # noqa: E402
 from rheograph.sim.params import scheme_settings  # noqa: E402
 
@@ -115,7 +115,7 @@ def main() -> None:
         lines.append(line)
     lines += [
         "",
-        "Command: `python bench/simulate_speed.py "
+        "Command: `python -m bench.simulate_speed "
         + " ".join(
             f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
             for k, v in vars(args).items()

@@ -6,7 +6,7 @@ and gradient-boosted trees on the eight descriptors computed from the noisy posi
 exact training snapshots).  Per target: R² (log10 for η_r and Π), the within-state fluctuation
 correlation and the share within ±15 %.
 
-    python bench/snapshot_noise.py docs/results/pressure_on_spring/N400_phi0.76 \\
+    python -m bench.snapshot_noise docs/results/pressure_on_spring/N400_phi0.76 \\
         docs/results/surrogate_study/physics_grouped --noise 0 0.001 0.003 0.01 0.03 0.05
 
 With ``--relax-strain Δγ`` a run whose model reads exact positions is also scored on the noisy
@@ -27,7 +27,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish, write_result_record
+
+from bench.publishing import command_line, publish, write_result_record
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "docs" / "results" / "bench" / "snapshot_noise"  # per run, read by bench/noise_figure.py

@@ -4,7 +4,7 @@ the M models (log η_r and log Π averaged in log space, Z_μ linearly).  The de
 (``predict.py``) already averages the K fold models; this measures what averaging buys on trajectories
 no member has seen, which a single model's held-out score does not show.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/surrogate_seed_ensemble.py --phi 0.70 --seeds 0 1 2
+    OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_seed_ensemble --phi 0.70 --seeds 0 1 2
 
 Each seed's run is kept under docs/results/seed_ensemble/N<N>_phi<φ>_seed<s>/ (finished folds are
 reused); the table replaces the ``seed_ensemble`` section of docs/benchmarks.md.
@@ -21,9 +21,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-from publishing import publish
-from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
+from bench.publishing import publish
+from bench.surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.learn.module import fold_metrics  # noqa: E402
 from rheograph.naming import state_point_key  # noqa: E402
 
@@ -138,7 +138,7 @@ def main(argv=None) -> None:
         "",
         f"Ensemble − one model, log η_r, per fold: {', '.join(f'{g:+.4f}' for g in gain)}.",
         "",
-        "Command: `python bench/surrogate_seed_ensemble.py --phi "
+        "Command: `python -m bench.surrogate_seed_ensemble --phi "
         f"{args.phi:g} --n {args.n} --seeds {' '.join(map(str, args.seeds))} --epochs {args.epochs}"
         + (" -- " + " ".join(args.overrides) if args.overrides else "")
         + "`",

@@ -2,7 +2,7 @@
 scored on the same folds, written as one table into docs/benchmarks.md (section ``surrogate_study``)
 and per-run reports under docs/results/surrogate_study/<variant>_<split>/.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/surrogate_study.py --phi 0.76 --epochs 60 \\
+    OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_study --phi 0.76 --epochs 60 \\
         --runs paper:grouped physics_positions:grouped physics:grouped physics_mean_pool:grouped \\
                paper:random physics:random
 
@@ -208,13 +208,13 @@ def main(argv=None) -> None:
         "|---|---|" + "---|" * (len(COLUMNS) + 2),
         *rows,
         "",
-        "Command: `python bench/surrogate_study.py "
+        "Command: `python -m bench.surrogate_study "
         + ("--reuse " if args.reuse else "")
         + f"--phi {args.phi} --epochs {args.epochs} --batch-size {args.batch_size} --runs "
         + " ".join(args.runs)
         + "`; reports: docs/results/surrogate_study/.",
     ]
-    from publishing import publish
+    from bench.publishing import publish
 
     publish("surrogate_study", "\n".join(lines), write=not args.no_write)
 

@@ -1,11 +1,11 @@
 """Surrogate cost: what training costs, what makes it cheaper, and accuracy against size and speed.
 All on the committed paper-scale set (held-out whole trajectories, ``data.split=grouped``), this machine.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py levers    # s/epoch of each speed lever, one fold
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py accuracy  # time to accuracy, before/after, N=400/2000
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py pareto    # R² vs inference ms and training minutes
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py folds     # K-fold wall time: fold processes vs one
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py inference # per-snapshot prediction vs simulation
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed levers    # s/epoch of each speed lever, one fold
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed accuracy  # time to accuracy, before/after, N=400/2000
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed pareto    # R² vs inference ms and training minutes
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed folds     # K-fold wall time: fold processes vs one
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed inference # per-snapshot prediction vs simulation
 
 Each subcommand writes its marked section of docs/benchmarks.md (``--no-write``: print only) and keeps its
 raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders from that file.
@@ -45,9 +45,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from publishing import replace_section
-from surrogate_study import VARIANTS, benchmark_config  # noqa: E402
 
+from bench.publishing import replace_section
+from bench.surrogate_study import VARIANTS, benchmark_config  # noqa: E402
 from rheograph.learn.module import regression_metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -441,7 +441,7 @@ def render_pareto(rows, args) -> str:
         "Figure: [figures/surrogate_pareto.png](figures/surrogate_pareto.png).",
         "",
         "Command (rows accumulate in docs/results/train_speed/pareto.json): "
-        "`python bench/train_speed.py pareto "
+        "`python -m bench.train_speed pareto "
         f"--models {' '.join(args.models)}`",
     ]
     return "\n".join(lines)
@@ -579,7 +579,7 @@ def render_folds(rows, args) -> str:
 
 
 def command_line() -> str:
-    return "python bench/train_speed.py " + " ".join(
+    return "python -m bench.train_speed " + " ".join(
         a for a in sys.argv[1:] if a not in ("--reuse", "--no-write")
     )
 

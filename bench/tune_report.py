@@ -3,8 +3,8 @@
 trial counts by state, the best objective, the median trial time, the best values, the five best
 trials and the parameter importances (fANOVA over the completed trials).
 
-    python bench/tune_report.py                         # every study in docs/results/tune/optuna.db
-    python bench/tune_report.py --studies physics_phi076 paper_phi076
+    python -m bench.tune_report                         # every study in docs/results/tune/optuna.db
+    python -m bench.tune_report --studies physics_phi076 paper_phi076
 
 The objective is the best-epoch unweighted validation loss on held-out trajectories (fold 0 of the
 phi = 0.76, N = 400 set, 30 epochs); lower is better.  It ranks configurations; their R² on all five
@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import optuna
-from publishing import publish
+
+from bench.publishing import publish
 
 ROOT = Path(__file__).resolve().parents[1]
 STORAGE = f"sqlite:///{ROOT / 'docs' / 'results' / 'tune' / 'optuna.db'}"
@@ -91,7 +92,7 @@ def main(argv=None) -> None:
             "Command: `python tune.py hparams_search=held_out_phi076 inputs=<physics|paper|"
             "physics_positions>` and `python tune.py hparams_search=held_out_phi076_solve` (resumable; "
             "a study name is refused for a search space other than its trials'), then "
-            "`python bench/tune_report.py`; the best trial of each study: "
+            "`python -m bench.tune_report`; the best trial of each study: "
             "`conf/experiment/<inputs>_phi076_best.yaml`.",
         ]
     )

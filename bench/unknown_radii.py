@@ -1,6 +1,6 @@
 """Surrogates trained on exactly bidisperse discs, on polydisperse suspensions whose radii are not known.
 
-    python bench/unknown_radii.py 'data/polydisperse/multirun/*/trajectory.h5' \
+    python -m bench.unknown_radii 'data/polydisperse/multirun/*/trajectory.h5' \
         --lookup 'data/paper/multirun/N400_phi0.76_*/trajectory.h5'
 
 Real particles spread in size by several per cent and a microscope does not measure each radius; the
@@ -30,9 +30,9 @@ import glob
 import sys
 
 import numpy as np
-from lfdem_snapshots import scores, state_means
-from publishing import command_line, publish
 
+from bench.lfdem_snapshots import scores, state_means
+from bench.publishing import command_line, publish
 from rheograph.errors import InputError
 
 NOMINAL = (1.0, 1.4)

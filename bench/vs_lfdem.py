@@ -2,8 +2,8 @@
 of the C++ reference code LF_DEM (public repository ryseto/LF_DEM), both run on one pinned core of this
 machine from the same initial configuration, at phi = 0.76, sigma/sigma0 = 10.
 
-    python bench/vs_lfdem.py --lfdem /work/lfdem/bin/LF_DEM                # N = 400, 2000; 3 repeats
-    LFDEM_BINARY=/work/lfdem/bin/LF_DEM python bench/vs_lfdem.py --n 400 --strains 0.02 0.04 \\
+    python -m bench.vs_lfdem --lfdem /work/lfdem/bin/LF_DEM                # N = 400, 2000; 3 repeats
+    LFDEM_BINARY=/work/lfdem/bin/LF_DEM python -m bench.vs_lfdem --n 400 --strains 0.02 0.04 \\
         --repeats 1 --no-write                                             # a quick check of the script
 
 LF_DEM is not part of this project: build it outside the repository (README.rst of LF_DEM; on Debian
@@ -51,8 +51,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, replace_section
 
+from bench.publishing import command_line, replace_section
 from rheograph.io.hdf5 import POSITION_DECIMALS
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,7 +1,7 @@
 """Where a shipped model is off on another system size: its mean log(predicted / true) η_r per run
 (state point and seed), on the flowing snapshots with strain >= 1, with declared position noise.
 
-    python bench/zero_shot_bias.py N400_phi0.80_imaging 'data/paper/multirun/N2000_phi0.8_*/trajectory.h5' \\
+    python -m bench.zero_shot_bias N400_phi0.80_imaging 'data/paper/multirun/N2000_phi0.8_*/trajectory.h5' \\
         --noise 0.01 --every 5
 
 Same snapshots and noise draws as ``bench/zero_shot_n.py`` with the same --every, --noise and --seed
@@ -17,7 +17,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from zero_shot_n import _noisy, trajectory_paths  # noqa: E402
+
+from bench.zero_shot_n import _noisy, trajectory_paths  # noqa: E402
 
 
 def main(argv=None) -> int:

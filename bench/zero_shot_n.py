@@ -1,8 +1,8 @@
 """Surrogates across system sizes: shipped models trained at one N, scored zero-shot on the snapshots of
 larger (or smaller) systems, which they never saw by construction.
 
-    python bench/zero_shot_n.py data/large_n/multirun --models N400_phi0.76 N2000_phi0.76
-    python bench/zero_shot_n.py data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
+    python -m bench.zero_shot_n data/large_n/multirun --models N400_phi0.76 N2000_phi0.76
+    python -m bench.zero_shot_n data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
         --models N400_phi0.76_imaging --noise 0 0.01 0.03 --every 4 \\
         --page benchmarks.md --section zero_shot_n_noise --title '...'
 
@@ -27,7 +27,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import command_line, publish
 
 
 def _noisy(snaps, keep, eps: float, rng):

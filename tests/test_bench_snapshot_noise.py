@@ -43,7 +43,7 @@ def test_noise_bench_records_each_runs_table_for_the_figure(tiny_files, tmp_path
     assert bench.main(args) == 0
     text = capsys.readouterr().out
     record = json.loads((tmp_path / "records" / f"{run_dir.name}.json").read_text())
-    assert record["noise"] == [0.0, 0.01] and "bench/snapshot_noise.py" in record["command"]
+    assert record["noise"] == [0.0, 0.01] and "python -m bench.snapshot_noise" in record["command"]
     table = [line for line in text.splitlines() if line.startswith("| graph network | R² log η_r |")]
     cells = [float(c) for c in table[0].strip("| ").split("|")[2:]]
     assert record["predictors"]["graph network"]["R² log η_r"] == cells

@@ -19,9 +19,9 @@ def test_a_marked_section_is_replaced_in_place_and_the_rest_of_the_page_kept(tmp
 
 def test_a_record_round_trips_and_a_damaged_one_is_one_line(tmp_path):
     path = tmp_path / "records" / "x.json"
-    write_record(path, {"command": "python bench/x.py", "values": [0.5, float("nan")]})
+    write_record(path, {"command": "python -m bench.x", "values": [0.5, float("nan")]})
     record = read_record(path, "result record of x")
-    assert record["command"] == "python bench/x.py" and record["values"][0] == 0.5
+    assert record["command"] == "python -m bench.x" and record["values"][0] == 0.5
     path.write_text("[1, 2]")
     with pytest.raises(InputError, match="x.json: not a result record of x"):
         read_record(path, "result record of x")

@@ -15,7 +15,6 @@ from rheograph.sim.init_config import initial_configuration
 from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = ROOT / "bench" / "vs_lfdem.py"
 REFERENCE_PARAMS = ROOT / "tests" / "data" / "lfdem_phi0.76" / "parameters_clm2d.txt"
 
 
@@ -27,7 +26,12 @@ def vs_lfdem():
 def run_script(*args):
     env = {k: v for k, v in os.environ.items() if k != "LFDEM_BINARY"}
     return subprocess.run(
-        [sys.executable, str(SCRIPT), *args], env=env, capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "bench.vs_lfdem", *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
 
 
