@@ -7,7 +7,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export OMP_WAIT_POLICY ?= PASSIVE
 # System packages for the CHOLMOD solver backend (rheograph.sim.solver): SuiteSparse headers for
 # scikit-sparse, and OpenBLAS as the system BLAS (the supernodal factorisation is 2.1x faster with it
-# than with Debian's reference BLAS at N = 2000: 5.8 against 12.4 ms, docs/benchmarks.md §3).
+# than with Debian's reference BLAS at N = 2000: 5.8 against 12.4 ms, docs/validation/speed.md).
 SYSTEM_PACKAGES := libsuitesparse-dev libopenblas0-serial
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 

@@ -13,7 +13,7 @@ reads), but the step count per unit time is that of a fast flow: confirming an a
 step, steps per unit time, mean and r.m.s. shear rate, the share of steps whose shear rate changes sign,
 the step-to-step change of the particle pressure (relative: what the chatter does to the arrested
 packing's labels) and the share of steps that change the number of touching or frictional contacts.
-Results replace the ``arrest_chatter`` section of docs/benchmarks.md unless ``--no-write``.
+Results replace the ``arrest_chatter`` section of docs/validation/speed.md unless ``--no-write``.
 """
 
 from __future__ import annotations

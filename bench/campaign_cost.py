@@ -8,7 +8,7 @@ CPU seconds are what each run recorded (``summary/cpu_seconds``: process CPU tim
 single-threaded), divided by the strain it reached.  Runs were made one per core on this 2-core machine,
 sometimes next to training, so they carry the machine's noise (≈ 1.5×).  ``--extra`` adds runs outside
 the dataset (the φ = 0.80 scheme study) in a second table, by scheme and disp_max.  Results replace the
-``campaign_cost`` section of docs/benchmarks.md unless ``--no-write``.
+``campaign_cost`` section of docs/validation/speed.md unless ``--no-write``.
 """
 
 from __future__ import annotations

@@ -300,7 +300,7 @@ def end_to_end(cache_dir: Path, device: torch.device, work: Path, quick: bool) -
     run_dir = work / f"c_{device.type}"
     shutil.rmtree(run_dir, ignore_errors=True)
     # on a GPU what its users run (experiment=demo_gpu: the GPU trainer, batch 128); on the CPU the demo
-    # in one fold process (its two-process wall is in docs/benchmarks.md)
+    # in one fold process (its two-process wall is in docs/validation/surrogate_cost.md)
     settings = ["experiment=demo_gpu"] if device.type == "cuda" else ["experiment=demo", "fold_workers=1"]
     command = [
         sys.executable,

@@ -14,7 +14,7 @@ positions-only surrogate loses to history; the gain from the solve, what the glo
 that per-snapshot sums miss.  A second table gives, per (φ, σ), the gap log10 η_r − log10 η_solve between
 the recorded and the one-solve viscosity (mean and spread within the state point): the stress the
 stretched springs carry, which positions cannot know.  Writes the ``history_information`` section of
-docs/benchmarks.md.
+docs/validation/surrogate_accuracy.md.
 """
 
 from __future__ import annotations

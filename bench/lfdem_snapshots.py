@@ -9,7 +9,7 @@ output every 0.1 strain, ``out_data_particle`` and ``out_data_interaction`` on).
 (``--min-strain``) are scored: R² on log10 η_r and Π, linear Z_μ, over all runs together.  Physics-only
 rows need no training: the one-solve η_r, the contact-spring pressure and the counted Z_μ computed from
 the same positions (the ``eta_solve``, ``pressure_spring``, ``z_mu_counted`` columns of a
-prediction).  Results replace the marked section of docs/benchmarks.md unless ``--no-write``.
+prediction).  Results replace the marked section of docs/validation/position_noise.md unless ``--no-write``.
 
 With ``--noise ε`` Gaussian noise of ε per coordinate [a] (seeded, ``--seed``) is added to LF_DEM's
 positions and declared to the model with the rounding (``position_noise`` = √(rounding² + ε²)): an
@@ -98,7 +98,9 @@ def main(argv=None) -> int:
     ap.add_argument("--timing-snapshots", type=int, default=1000)
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian position noise per coordinate [a]")
     ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
-    ap.add_argument("--section", default="lfdem_snapshots", help="the marked section of docs/benchmarks.md")
+    ap.add_argument(
+        "--section", default="lfdem_snapshots", help="the marked section of docs/validation/position_noise.md"
+    )
     ap.add_argument(
         "--lookup",
         nargs="+",

@@ -130,7 +130,7 @@ def main(argv=None) -> int:
         help="leave out the rows at these σ/σ0 (e.g. a state point whose lookup is an arrested run's mean)",
     )
     ap.add_argument("--cache-dir", default=str(ROOT / "data" / "cache"))
-    ap.add_argument("--page", default="benchmarks.md", help="docs page with the marked section")
+    ap.add_argument("--page", default=None, help="docs page with the marked section (default: its record's)")
     ap.add_argument("--section", default="noise_bins")
     ap.add_argument("--title", default="Imaging models by noise level, from their own held-out predictions")
     ap.add_argument("--no-write", action="store_true")

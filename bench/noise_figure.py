@@ -7,8 +7,8 @@ positions, gap-shell inputs (φ = 0.76) and the lookup of the training mean at (
 
 It draws the numbers that ``bench/snapshot_noise.py`` records for each run it scores
 (docs/results/bench/snapshot_noise/<run>.json, each with the command that made it; the same numbers as
-its tables in docs/benchmarks.md), so it costs no prediction: rerun those commands to refresh them, then
-this.  Writes docs/figures/imaging_noise.png (``--out``).
+its tables in docs/validation/position_noise.md), so it costs no prediction: rerun those commands to
+refresh them, then this.  Writes docs/figures/imaging_noise.png (``--out``).
 """
 
 from __future__ import annotations

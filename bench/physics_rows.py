@@ -8,7 +8,7 @@ variance that the network removes, 1 − (1 − R²_net) / (1 − R²_physics).
 
 Each fold's graphs are rebuilt from its split file (same files, same graph settings: the same order as
 in training) and scored with the training code's metrics (rheograph.learn.module.fold_metrics).  Results
-replace the marked section of docs/benchmarks.md unless ``--no-write``.
+replace the marked section of docs/validation/surrogate_accuracy.md unless ``--no-write``.
 """
 
 from __future__ import annotations

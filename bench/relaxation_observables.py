@@ -14,7 +14,7 @@ trajectories given at that state point (seeds not sampled).
     python -m bench.relaxation_observables 'data/paper/multirun/N400_phi0.76_*_seed[12]_*/trajectory.h5' \\
         --lookup 'data/paper/multirun/N400_phi0.76_*_seed3_*/trajectory.h5'
 
-Results replace the marked section (``--section``) of docs/benchmarks.md unless ``--no-write``.
+Results replace the marked section (``--section``) of docs/validation/position_noise.md unless ``--no-write``.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ positions after a shear of Δγ under the simulator's own dynamics at the impose
 closed again), on every ``--relax-every``-th test snapshot (about 0.4 s each at N = 400).
 
 One noise draw per (ε, snapshot), seeded (``--seed``).  Results replace the marked section
-(``--section``) of docs/benchmarks.md unless ``--no-write``.
+(``--section``) of docs/validation/position_noise.md unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -187,7 +187,9 @@ def main(argv=None) -> int:
     ap.add_argument("--relax-strain", type=float, default=0.0, help="also score relaxed positions (0: no)")
     ap.add_argument("--relax-every", type=int, default=4, help="relax every n-th test snapshot")
     ap.add_argument("--workers", type=int, default=1, help="folds scored in parallel processes")
-    ap.add_argument("--section", default="snapshot_noise", help="the marked section of docs/benchmarks.md")
+    ap.add_argument(
+        "--section", default="snapshot_noise", help="the marked section of docs/validation/position_noise.md"
+    )
     ap.add_argument("--title", default="Position noise: how far the surrogates read imprecise snapshots")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)

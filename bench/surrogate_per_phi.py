@@ -2,7 +2,7 @@
 mean ± std over the 5 test folds, one model per (φ, N), with the paper's reported values beside ours.
 Each (φ, N) run keeps its report (Fig. 4 parity with ±15 % bands, Fig. 6 flow curves, MAE distributions)
 under docs/results/surrogate_per_phi/N<N>_phi<φ>/; the table replaces the ``surrogate_per_phi`` section of
-docs/benchmarks.md and the figure is docs/figures/surrogate_r2_vs_phi.png.
+docs/validation/surrogate_accuracy.md and the figure is docs/figures/surrogate_r2_vs_phi.png.
 
     OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_per_phi --n 400 --phi 0.70 0.72 0.74 0.76 \\
         [--split grouped random] [--epochs 60] [extra train.py overrides after --]

@@ -7,7 +7,7 @@ no member has seen, which a single model's held-out score does not show.
     OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_seed_ensemble --phi 0.70 --seeds 0 1 2
 
 Each seed's run is kept under docs/results/seed_ensemble/N<N>_phi<φ>_seed<s>/ (finished folds are
-reused); the table replaces the ``seed_ensemble`` section of docs/benchmarks.md.
+reused); the table replaces the ``seed_ensemble`` section of docs/validation/surrogate_accuracy.md.
 """
 
 from __future__ import annotations

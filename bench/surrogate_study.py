@@ -1,6 +1,6 @@
 """Surrogate accuracy study: input variants x split protocols on one area fraction, with the baselines
-scored on the same folds, written as one table into docs/benchmarks.md (section ``surrogate_study``)
-and per-run reports under docs/results/surrogate_study/<variant>_<split>/.
+scored on the same folds, written as one table into docs/validation/surrogate_accuracy.md (section
+``surrogate_study``) and per-run reports under docs/results/surrogate_study/<variant>_<split>/.
 
     OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_study --phi 0.76 --epochs 60 \\
         --runs paper:grouped physics_positions:grouped physics:grouped physics_mean_pool:grouped \\
@@ -95,8 +95,8 @@ def train_or_resume(cfg, run_dir: Path) -> None:
 def benchmark_config(files, phi, n, split, epochs, fold_workers, batch_size=None, extra=()):
     """The training configuration every surrogate benchmark composes: one (phi, N), a fixed epoch budget
     (cosine schedule, best validation epoch kept), no logger.  Batch size (default): 32 graphs at
-    N < 2000, 8 at N >= 2000 — the fastest per epoch (docs/benchmarks.md §5: batches of 32 N = 2000
-    graphs leave the cache and train 1.4x slower)."""
+    N < 2000, 8 at N >= 2000 — the fastest per epoch (docs/validation/surrogate_cost.md: batches of 32
+    N = 2000 graphs leave the cache and train 1.4x slower)."""
     if batch_size is None:
         batch_size = 8 if n >= 2000 else 32
     overrides = [
@@ -164,7 +164,9 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--fold-workers", type=int, default=1, help="parallel fold processes (one per core)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "surrogate_study"))
-    ap.add_argument("--no-write", action="store_true", help="do not touch docs/benchmarks.md")
+    ap.add_argument(
+        "--no-write", action="store_true", help="do not touch docs/validation/surrogate_accuracy.md"
+    )
     ap.add_argument(
         "--reuse", action="store_true", help="take runs whose metrics.json exists instead of retraining them"
     )

@@ -11,7 +11,7 @@ and the cross-validated error bar of the training run (rheograph.learn.error_mod
 held-out-trajectory residuals per state point).  Speed: wall
 seconds per predicted snapshot (graph building + 5 models) against the simulator's CPU seconds for one
 decorrelated snapshot (the runs' recorded CPU seconds per strain × the measured decorrelation strain).
-Replaces the ``surrogate_uncertainty`` section of docs/benchmarks.md.
+Replaces the ``surrogate_uncertainty`` section of docs/validation/surrogate_accuracy.md.
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ All on the committed paper-scale set (held-out whole trajectories, ``data.split=
     OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed folds     # K-fold wall time: fold processes vs one
     OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed inference # per-snapshot prediction vs simulation
 
-Each subcommand writes its marked section of docs/benchmarks.md (``--no-write``: print only) and keeps its
-raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders from that file.
+Each subcommand writes its marked section of docs/validation/surrogate_cost.md (``--no-write``: print
+only) and keeps its raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders
+from that file.
 
 * ``levers``: seconds per training epoch (median of ``--repeats`` epochs after one warm-up epoch, one
   thread) of the default model on fold 0's training graphs for one lever at a time: ``torch.compile``
@@ -46,7 +47,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from bench.publishing import replace_section
+from bench.publishing import publish
 from bench.surrogate_study import VARIANTS, benchmark_config  # noqa: E402
 from rheograph.learn.module import regression_metrics  # noqa: E402
 
@@ -648,10 +649,13 @@ def main() -> None:
                 indent=1,
             )
         )
-    text = render(rows, args)
-    print(text)
-    if not args.no_write:
-        replace_section(ROOT / "docs" / "benchmarks.md", f"train_speed_{args.what}", text)
+    publish(
+        f"train_speed_{args.what}",
+        render(rows, args),
+        not args.no_write,
+        page="validation/surrogate_cost.md",
+        command=command_line(),
+    )
 
 
 if __name__ == "__main__":

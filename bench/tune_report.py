@@ -1,4 +1,4 @@
-"""The Optuna studies behind the surrogate's defaults, as one section of docs/benchmarks.md
+"""The Optuna studies behind the surrogate's defaults, as one section of docs/validation/surrogate_accuracy.md
 (``tune_report``): per study (one per input variant, ``conf/hparams_search/held_out_phi076.yaml``) the
 trial counts by state, the best objective, the median trial time, the best values, the five best
 trials and the parameter importances (fANOVA over the completed trials).

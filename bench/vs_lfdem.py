@@ -33,8 +33,8 @@ against rheograph's (identical positions give the same rate to LF_DEM's 6 printe
 Schemes: rheograph ``euler-lagged`` (LF_DEM's discretisation: explicit Euler, dt from the previous step's
 speeds) at ``--disp`` and ``implicit`` at ``--implicit-disp``, against LF_DEM at each ``--lfdem-disp``
 (the same disp_max, and the smaller one it needs for the accuracy the implicit scheme has at 2e-3,
-docs/benchmarks.md section 2).  LF_DEM's files stay in a temporary directory.  Results replace the marked
-section of docs/benchmarks.md unless ``--no-write``.  Run it alone on the machine.
+docs/validation/time_step.md).  LF_DEM's files stay in a temporary directory.  Results replace the marked
+section of docs/validation/speed.md unless ``--no-write``.  Run it alone on the machine.
 """
 
 from __future__ import annotations
@@ -52,12 +52,11 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.publishing import command_line, replace_section
+from bench.publishing import command_line, publish
 from rheograph.io.hdf5 import POSITION_DECIMALS
 
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "vs_lfdem"
-INSERT_BEFORE = "## 4. Surrogate accuracy"  # where the section goes the first time it is written
 THREAD_ENV = {
     "OPENBLAS_NUM_THREADS": "1",
     "OMP_NUM_THREADS": "1",
@@ -459,11 +458,13 @@ def main(argv=None) -> int:
             "",
             f"Command (wall {time.time() - started:.0f} s): `{command}`",
         ]
-        print("\n".join(lines), flush=True)
-        if not args.no_write:
-            replace_section(
-                ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines), INSERT_BEFORE
-            )
+        publish(
+            f"{SECTION}_n{n}",
+            "\n".join(lines),
+            not args.no_write,
+            page="validation/speed.md",
+            command=command,
+        )
     return 0
 
 

@@ -4,7 +4,7 @@ larger (or smaller) systems, which they never saw by construction.
     python -m bench.zero_shot_n data/large_n/multirun --models N400_phi0.76 N2000_phi0.76
     python -m bench.zero_shot_n data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
         --models N400_phi0.76_imaging --noise 0 0.01 0.03 --every 4 \\
-        --page benchmarks.md --section zero_shot_n_noise --title '...'
+        --page validation/position_noise.md --section zero_shot_n_noise --title '...'
 
 Every snapshot with strain >= 1 of every trajectory under the directories (grouped by N and φ), each
 model whose area fractions cover the group: its ensemble prediction (the models flag N as outside their
@@ -202,7 +202,7 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, nargs="+", default=[0.0], help="position noise ε [a], declared")
     ap.add_argument("--every", type=int, default=1, help="score every n-th snapshot")
     ap.add_argument("--seed", type=int, default=0, help="of the noise draws")
-    ap.add_argument("--page", default="jamming.md", help="the docs page holding the section")
+    ap.add_argument("--page", default=None, help="the docs page holding the section (default: its record's)")
     ap.add_argument("--section", default="zero_shot_n")
     ap.add_argument("--title", default=None, help="a heading inside the section (none: the page has one)")
     ap.add_argument("--no-write", action="store_true")

@@ -1,5 +1,5 @@
 """Every simulation campaign sweeps only valid state points (the datasets' at the converged step of their
-area fraction, docs/benchmarks.md §2), every training experiment composes and runs, and neither group
+area fraction, docs/validation/time_step.md), every training experiment composes and runs, and neither group
 is accepted by the other entry point."""
 
 import dataclasses

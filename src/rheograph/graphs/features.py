@@ -31,7 +31,7 @@ Edge features, by name (``EDGE_FEATURES``):
   ``spring_shear`` = kt_ratio a_bar r sym(n (x) stretch)_xy / delta_sigma, the tangential spring's shear
   stresslet in units of sigma: the simulator's spring shear stress is (6 pi / area) sigma times the sum
   over pairs of (spring_shear - contact_shear).  They measure how much of the targets positions cannot
-  know (docs/benchmarks.md §4).
+  know (docs/validation/surrogate_accuracy.md).
 
 All features are O(1) numbers on purpose; the model standardises them with statistics of its training
 folds anyway.
@@ -281,7 +281,7 @@ def node_features(radii, size_ratio):
 # phi = 0.76, N = 400, after noise of 0.001 a and a 0.01 strain, the last step's eta_r scores R^2 log
 # eta_r 0.984 against the snapshot's recorded eta_r once one mean offset is removed (the one-solve of
 # the same relaxed positions: 0.968), and on exact positions the early one 0.999 with no offset
-# (docs/benchmarks.md, "What the relaxation measures").
+# (docs/validation/position_noise.md, "What the relaxation measures").
 COMPUTED_GRAPH_INPUTS = ("solve_viscosity", "frictional_coordination", "spring_pressure")
 RELAXED_GRAPH_INPUTS = (
     "relaxed_viscosity",
