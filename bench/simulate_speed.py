@@ -64,7 +64,7 @@ def measure(n, disp, scheme, solver, skin, warmup, window, windows):
     return {k: float(np.median([r[k] for r in results])) for k in results[0]}
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[400, 1000, 2000])
     ap.add_argument("--disp", type=float, nargs="+", default=[2e-3, 1e-3])
@@ -80,7 +80,7 @@ def main() -> None:
     ap.add_argument("--windows", type=int, default=3)
     ap.add_argument("--particle-steps", type=float, default=3e6, help="work per timing window")
     ap.add_argument("--no-write", action="store_true")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     header = [
         "N", "disp_max", "integrator", "solver", "skin", "wall s/strain", "CPU s/strain", "steps/strain",
         "ms/step", "µs/particle-step", "neighbours", "assembly", "factorise", "solve", "stress", "update",
