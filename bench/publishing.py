@@ -49,7 +49,7 @@ def publish(
     if page is None:
         known = record_path(section)
         page = read_record(known, f"record of {section}")["page"] if known.exists() else None
-        if page is None:
+        if page is None and write:
             raise SystemExit(f"{section}: no record names its page yet; pass page=")
     full = dict(record or {})
     blocks = as_blocks(content)

@@ -27,7 +27,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 
 from bench.publishing import publish
-from bench.surrogate_study import benchmark_config, train_or_resume  # noqa: E402
+from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.io.index import read_index  # noqa: E402
 from rheograph.learn.train import run_stamps, stamps_differ  # noqa: E402
 

@@ -23,7 +23,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 
 from bench.publishing import publish
-from bench.surrogate_study import benchmark_config, train_or_resume  # noqa: E402
+from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.learn.module import fold_metrics  # noqa: E402
 from rheograph.naming import state_point_key  # noqa: E402
 

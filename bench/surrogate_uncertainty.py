@@ -29,7 +29,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 
 from bench.publishing import publish
-from bench.surrogate_study import benchmark_config, train_or_resume  # noqa: E402
+from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.analysis.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
 from rheograph.io.snapshots import read_snapshots  # noqa: E402
 from rheograph.learn.error_model import error_scale  # noqa: E402

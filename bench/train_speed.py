@@ -48,7 +48,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from bench.publishing import publish
-from bench.surrogate_study import VARIANTS, benchmark_config  # noqa: E402
+from bench.training import VARIANTS, benchmark_config  # noqa: E402
 from rheograph.learn.module import regression_metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -174,7 +174,7 @@ def test_every_surrogate_study_variant_composes_valid_graph_settings():
 
     from rheograph.learn.train import graph_settings
 
-    study = load_bench_script("surrogate_study")
+    study = load_bench_script("training")
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         for name, overrides in study.VARIANTS.items():
             settings = graph_settings(compose(config_name="train", overrides=overrides))

@@ -335,7 +335,7 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
     the previous one would step with (the first, the simulator's start value disp_max).  Measured at
     phi = 0.70, N = 400 (600 snapshots): its within-state fluctuation correlates with the recorded eta_r
     at 0.92 after one pass, 0.944 after two, 0.946 after three; with the recorded springs, 0.978 (a
-    one-off measurement; the reproducible effect is bench/history_information.py).
+    one-off measurement; the reproducible effect: docs/validation/surrogate_accuracy.md, the contact history).
     """
     sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
     snapshot = SimState(
