@@ -9,10 +9,10 @@ import shlex
 import sys
 from pathlib import Path
 
-from bench.records import DOCS, RECORDS, as_blocks, check_record, render_section, table, text
+from bench.records import DOCS, RECORDS, Section, as_blocks, check_record, render_section, table, text
 from rheograph.io.pages import read_record, replace_section, write_record
 
-__all__ = ["command_line", "publish", "read_result_record", "record_path", "table", "text"]
+__all__ = ["Section", "command_line", "publish", "read_result_record", "record_path", "table", "text"]
 
 ROOT = Path(__file__).resolve().parents[1]
 # where records go instead (and no page is touched): bench.quick's temporary folder
@@ -39,7 +39,8 @@ def publish(
     """Print a result section and (unless the benchmark's --no-write) keep it as the record
     docs/results/bench/<section>.json and draw it into its page.
 
-    ``content``: the section's blocks (:func:`table` and :func:`text`, or strings of prose); ``record``:
+    ``content``: the section's blocks (a :class:`Section`, or a list of :func:`table`, :func:`text` and
+    strings of prose); ``record``:
     raw numbers kept beside them; ``page`` (under docs/): by default the page the section's record already
     names.  Where ``$RHEOGRAPH_BENCH_OUT`` is set the record goes to that folder and no page is touched.
     Returns the record."""

@@ -1,7 +1,8 @@
 """A few cheap benchmarks rerun at small size into a temporary folder (``make bench-quick``): each must
 run end to end and write a section record of the right schema, with a table; the published pages and
-records are not touched.  The campaign cost, which only reads the committed runs, must give back its
-published record exactly.
+records are not touched.  Those that only read committed results (the campaign cost, the finite-size
+table, the large-N cost, three training-cost tables from their saved rows) must give back their
+published sections exactly.
 
     python -m bench.quick [--keep DIR]
 """
@@ -15,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench import campaign_cost, factor_scaling, simulate_speed
+from bench import campaign_cost, factor_scaling, finite_size, large_n, simulate_speed, train_speed
 from bench.publishing import OUT_ENV, read_result_record
 from bench.records import check_record, render_section
 
@@ -26,6 +27,13 @@ RUNS = [
         campaign_cost,
         ["--index", "data/paper/index.json", "--extra", "data/scheme_phi080/*/trajectory.h5"],
         True,
+    ),
+    ("finite_size", finite_size, ["data/paper/multirun", "data/large_n/multirun"], True),
+    ("large_n_cost", large_n, ["data/large_n/multirun"], True),
+    # the training-cost tables drawn again from their saved rows (no training; these draw no figure)
+    *(
+        (f"train_speed_{what}", train_speed, [what, "--reuse"], True)
+        for what in ("levers", "folds", "inference")
     ),
     (
         "simulate_speed",

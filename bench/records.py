@@ -38,8 +38,35 @@ def text(*lines: str) -> dict:
     return {"text": "\n".join(lines)}
 
 
+class Section:
+    """A section built in order: lines of prose (``add``) and tables (``table``), as blocks that render
+    exactly as the lines would have been joined."""
+
+    def __init__(self, *lines: str) -> None:
+        self._blocks: list[dict] = []
+        self._lines: list[str] = list(lines)
+
+    def add(self, *lines: str) -> None:
+        self._lines.extend(lines)
+
+    def table(self, header, rows, align=None) -> None:
+        self._flush()
+        self._blocks.append(table(header, rows, align))
+
+    def blocks(self) -> list[dict]:
+        self._flush()
+        return list(self._blocks)
+
+    def _flush(self) -> None:
+        if self._lines:
+            self._blocks.append(text(*self._lines))
+            self._lines = []
+
+
 def as_blocks(content) -> list[dict]:
     """``content`` (a string, one block, or a list of strings and blocks) as a list of blocks."""
+    if isinstance(content, Section):
+        return content.blocks()
     if isinstance(content, (str, dict)):
         content = [content]
     return [text(b) if isinstance(b, str) else b for b in content]

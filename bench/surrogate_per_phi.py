@@ -183,7 +183,7 @@ def write(results: dict, args) -> None:
         ]
     lines += [
         "",
-        "![R² vs φ](figures/surrogate_r2_vs_phi.png)",
+        "![R² vs φ](../figures/surrogate_r2_vs_phi.png)",
         "",
         "Per-(φ, N) reports (parity, flow curves, MAE distributions): docs/results/surrogate_per_phi/.  "
         "Command: `python -m bench.surrogate_per_phi --n "

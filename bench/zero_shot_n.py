@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.publishing import command_line, publish
+from bench.publishing import command_line, publish, table
 
 
 def _noisy(snaps, keep, eps: float, rng):
@@ -223,26 +223,24 @@ def main(argv=None) -> int:
         "Gaussian noise per coordinate added to the positions and declared to the model (units of a).  "
         "The lookup is the mean of the other seeds' runs at the same (N, φ, σ): what a user who had "
         "simulated that state point would predict without reading a snapshot (absent where a state point "
-        "has one run; where it exists, every row of that (N, φ) is scored on the snapshots it covers).",
-        "",
-        "| N | φ | model | zero-shot | ε [a] | snapshots | stresses | R² log η_r | R² log Π | R² Z_μ | "
-        "fluct. η_r |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "has one run; where it exists, every row of that (N, φ) is scored on the snapshots it covers).\n",
     ]
+    header = ["N", "φ", "model", "zero-shot", "ε [a]", "snapshots", "stresses", "R² log η_r", "R² log Π"]
+    header += ["R² Z_μ", "fluct. η_r"]
+    body = []
     for r in rows:
         seen = "—" if r["zero_shot"] is None else "yes" if r["zero_shot"] else "no: its training N"
         eps = "any" if r["eps"] is None else f"{r['eps']:g}"
-        lines.append(
-            f"| {r['n']} | {r['phi']:g} | {r['model']} | {seen} | {eps} | "
-            f"{r['snapshots']} | {r['stresses']} | "
-            f"{r['r2_log_eta']:.4f} | {r['r2_log_pressure']:.5f} | {r['r2_z_mu']:.5f} | "
-            f"{r['fluct_eta']:.3f} |"
+        body.append(
+            [f"{r['n']}", f"{r['phi']:g}", r["model"], seen, eps, f"{r['snapshots']}", f"{r['stresses']}"]
+            + [f"{r['r2_log_eta']:.4f}", f"{r['r2_log_pressure']:.5f}", f"{r['r2_z_mu']:.5f}"]
+            + [f"{r['fluct_eta']:.3f}"]
         )
-    command = command_line("zero_shot_n.py", argv)
-    lines += ["", f"Command: `{command}`"]
+    command = command_line("zero_shot_n", argv)
+    lines += [table(header, body), f"\nCommand: `{command}`"]
     if args.title:
-        lines = [f"### {args.title}", "", *lines]
-    publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
+        lines = [f"### {args.title}\n", *lines]
+    publish(args.section, lines, not args.no_write, page=args.page, command=command)
     if snapshots:
         print(
             "\n| N | φ | model | ε [a] | run | σ/σ0 | strain | η_r | η_r pred/true | Π pred/true "
