@@ -52,7 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.publishing import command_line, publish
+from bench.publishing import Section, command_line, publish
+from bench.publishing import table as table_block
 from rheograph.io.hdf5 import POSITION_DECIMALS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -353,13 +354,20 @@ def measure(args, binary: Path, work: Path) -> tuple[list[dict], list[str], str]
     return rows, checks, version
 
 
-def table(rows: list[dict], lfdem_disps: list[float]) -> list[str]:
-    ref_cols = [f"LF_DEM {d:g} / this (CPU per strain)" for d in lfdem_disps]
-    lines = [
-        "| N | code | scheme | disp_max | CPU s/strain | steps/strain | ms/step | µs/particle-step "
-        "| " + " | ".join(ref_cols) + " |",
-        "|---|---|---|---|---|---|---|---|" + "---|" * len(ref_cols),
+def table(rows: list[dict], lfdem_disps: list[float]) -> dict:
+    """A table block: each code's cost, and LF_DEM's over this one's at each LF_DEM disp_max."""
+    header = [
+        "N",
+        "code",
+        "scheme",
+        "disp_max",
+        "CPU s/strain",
+        "steps/strain",
+        "ms/step",
+        "µs/particle-step",
     ]
+    header += [f"LF_DEM {d:g} / this (CPU per strain)" for d in lfdem_disps]
+    body = []
     for r in rows:
         refs = {x["disp"]: x for x in rows if x["n"] == r["n"] and x["code"] == "LF_DEM"}
         ratios = [
@@ -368,13 +376,12 @@ def table(rows: list[dict], lfdem_disps: list[float]) -> list[str]:
             else "–"
             for d in lfdem_disps
         ]
-        lines.append(
-            f"| {r['n']} | {r['code']} | {r['scheme']} | {r['disp']:g} | {r['cpu_per_strain']:.1f} | "
-            f"{r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | {r['us_per_particle_step']:.2f} | "
-            + " | ".join(ratios)
-            + " |"
+        body.append(
+            [f"{r['n']}", r["code"], r["scheme"], f"{r['disp']:g}", f"{r['cpu_per_strain']:.1f}"]
+            + [f"{r['steps_per_strain']:.0f}", f"{r['ms_per_step']:.2f}", f"{r['us_per_particle_step']:.2f}"]
+            + ratios
         )
-    return lines
+    return table_block(header, body)
 
 
 def find_binary(given: str | None) -> tuple[Path | None, str]:
@@ -440,7 +447,7 @@ def main(argv=None) -> int:
             shutil.rmtree(work, ignore_errors=True)
     command = command_line("vs_lfdem.py", argv)
     for n in args.n:  # one section per system size, so that sizes can be measured in separate runs
-        lines = [
+        out = Section(
             f"### Side by side with LF_DEM, N = {n}",
             "",
             f"Machine: {os.cpu_count()} cores; every run a child process pinned to core {args.core}, "
@@ -452,15 +459,17 @@ def main(argv=None) -> int:
             f"{version or '(version unknown)'}, explicit Euler, `-s <σ>cl`; rheograph `simulate.py`, "
             "solver auto.",
             "",
-            *table([r for r in rows if r["n"] == n], args.lfdem_disp),
+        )
+        out.table(**table([r for r in rows if r["n"] == n], args.lfdem_disp)["table"])
+        out.add(
             "",
             *[f"* {c}" for c in checks if c.startswith(f"N = {n}:")],
             "",
             f"Command (wall {time.time() - started:.0f} s): `{command}`",
-        ]
+        )
         publish(
             f"{SECTION}_n{n}",
-            "\n".join(lines),
+            out,
             not args.no_write,
             page="validation/speed.md",
             command=command,
