@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from rheograph.errors import InputError
-from rheograph.io.pages import read_record
+from rheograph.io.pages import read_record, render_blocks, table_block
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -23,14 +23,7 @@ REQUIRED = ("section", "page", "command", "blocks")
 def table(header, rows, align=None) -> dict:
     """A table block: ``header`` (column names), ``rows`` (cells, formatted as they are to be published)
     and ``align`` (each column's separator cell, ``---`` by default)."""
-    header = [str(h) for h in header]
-    return {
-        "table": {
-            "header": header,
-            "align": list(align) if align is not None else ["---"] * len(header),
-            "rows": [[str(c) for c in row] for row in rows],
-        }
-    }
+    return table_block(header, rows, align)
 
 
 def text(*lines: str) -> dict:
@@ -95,21 +88,9 @@ def check_record(record: dict, where: str = "record") -> None:
             raise InputError(f"{where}: block {k} is neither text nor a table")
 
 
-def render_block(block: dict) -> str:
-    if "text" in block:
-        return block["text"]
-    t = block["table"]
-    lines = [_row(t["header"]), "|" + "|".join(t["align"]) + "|"]
-    return "\n".join(lines + [_row(row) for row in t["rows"]])
-
-
-def _row(cells) -> str:
-    return "|" + "|".join(f" {c} " if c else " " for c in cells) + "|"
-
-
 def render_section(record: dict) -> str:
     """The markdown of a record's section (between its markers)."""
-    return "\n".join(render_block(b) for b in record["blocks"])
+    return render_blocks(record["blocks"])
 
 
 def load_records(records: Path = RECORDS) -> list[dict]:

@@ -10,8 +10,6 @@ from bench import render
 from bench.records import DOCS, RECORDS, load_records, render_section
 
 MARKER = re.compile(r"<!-- ([\w.-]+):start -->")
-# marked sections written by a package command rather than a benchmark (rheograph.analysis.jamming_points)
-NOT_BENCH = {"jamming_fits"}
 
 
 def test_every_page_holds_what_its_records_give():
@@ -28,7 +26,7 @@ def test_every_marked_section_has_one_record_and_every_record_a_command():
         for name in MARKER.findall(page.read_text()):
             assert name not in marked, f"section {name} is marked on two pages"
             marked[name] = str(page.relative_to(DOCS))
-    assert set(marked) - NOT_BENCH == set(records)
+    assert set(marked) == set(records)
     for name, record in records.items():
         assert record["page"] == marked[name]
         assert record["command"] is None or record["command"].startswith(("python", "OMP_", "PYTHONPATH"))
