@@ -7,11 +7,11 @@ export OPENBLAS_NUM_THREADS ?= 1
 export OMP_WAIT_POLICY ?= PASSIVE
 # System packages for the CHOLMOD solver backend (rheograph.sim.solver): SuiteSparse headers for
 # scikit-sparse, and OpenBLAS as the system BLAS (the supernodal factorisation is 2.1x faster with it
-# than with Debian's reference BLAS at N = 2000: 5.8 against 12.4 ms, docs/benchmarks.md §3).
+# than with Debian's reference BLAS at N = 2000: 5.8 against 12.4 ms, docs/validation/speed.md).
 SYSTEM_PACKAGES := libsuitesparse-dev libopenblas0-serial
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: install system-packages demo test test-slow lint docs cards
+.PHONY: install system-packages demo test test-slow lint docs cards bench bench-render bench-quick
 
 install: $(VENV)/.installed
 
@@ -50,6 +50,19 @@ test: install
 # the long tests (N = 400 runs against LF_DEM's series, dense high-stress runs): CI runs them after `test`
 test-slow: install
 	$(PY) -m pytest -q -m slow
+
+# the published tables: every marked section of the docs pages against its JSON record under
+# docs/results/bench/ (fails naming the sections that differ); bench-render rewrites them from the records
+bench: install
+	$(PY) -m bench.render --check
+
+bench-render: install
+	$(PY) -m bench.render
+
+# a few cheap benchmarks rerun at small size into a temporary folder (a minute): do they still run and
+# write records of the right schema?  The full benchmarks take hours: see docs/validation/index.md
+bench-quick: install
+	$(PY) -m bench.quick
 
 # the documentation (mkdocs + mkdocstrings; reference pages generated from the code), into site/: warnings
 # and broken links fail the build

@@ -1,14 +1,14 @@
 """Campaign cost: CPU seconds per unit strain of every committed run, per (N, φ, σ), and the CPU hours a
 full grid costs, so that the size of the dataset can be planned.
 
-    python bench/campaign_cost.py [--index data/paper/index.json] \\
+    python -m bench.campaign_cost [--index data/paper/index.json] \\
         [--extra 'data/scheme_phi080/*/trajectory.h5']
 
 CPU seconds are what each run recorded (``summary/cpu_seconds``: process CPU time over all invocations,
 single-threaded), divided by the strain it reached.  Runs were made one per core on this 2-core machine,
 sometimes next to training, so they carry the machine's noise (≈ 1.5×).  ``--extra`` adds runs outside
 the dataset (the φ = 0.80 scheme study) in a second table, by scheme and disp_max.  Results replace the
-``campaign_cost`` section of docs/benchmarks.md unless ``--no-write``.
+``campaign_cost`` section of docs/validation/speed.md unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from publishing import publish
 
+from bench.publishing import publish, table
 from rheograph.analysis.dataset_card import run_cpu_seconds
 from rheograph.io.hdf5 import read_run_info
 from rheograph.io.index import read_index
@@ -71,7 +71,8 @@ def extra_rows(pattern: str) -> list[dict]:
     return rows
 
 
-def render(rows: list[dict], extra: list[dict], command: str) -> str:
+def render(rows: list[dict], extra: list[dict], command: str) -> list:
+    """The section's blocks: the dataset's table, the extra runs' table, the command."""
     by_point = defaultdict(list)
     recorded, planned_strain = defaultdict(float), defaultdict(float)
     for r in rows:
@@ -82,20 +83,18 @@ def render(rows: list[dict], extra: list[dict], command: str) -> str:
     stresses = sorted({s for _, _, s in by_point})
     # the grid planned at an area fraction: every stress the dataset has there at any N
     planned = {phi: {s for _, p, s in by_point if p == phi} for _, phi in sizes}
-    lines = [
+    blocks = [
         "CPU seconds per unit strain (median over seeds) of the committed dataset runs (implicit, disp_max "
         "2e-3; 1e-3 at φ = 0.80), per σ/σ0 (–: not simulated at that (N, φ)).  *Recorded*: the CPU hours "
         "the runs at that (N, φ) spent (unfinished ones so far).  *Grid, extrapolated*: the medians × the "
         f"planned seeds (N = 400: {SEEDS_PLANNED[400]}, N = 2000: {SEEDS_PLANNED[2000]}) × the strain "
         "per run (the experiment's `sim.strain`), summed over the stresses the dataset has at that φ — "
         "an upper estimate where runs shear-jam (they stop early), a lower bound (≥) where a planned stress "
-        "has no run yet.",
-        "",
-        "| N | φ | "
-        + " | ".join(f"{s:g}" for s in stresses)
-        + " | strain per run | recorded CPU h | grid CPU h, extrapolated |",
-        "|---|---|" + "---|" * len(stresses) + "---|---|---|",
+        "has no run yet.\n",
     ]
+    header = ["N", "φ", *(f"{s:g}" for s in stresses), "strain per run", "recorded CPU h"]
+    header.append("grid CPU h, extrapolated")
+    body = []
     for n, phi in sizes:
         medians = {
             s: np.nanmedian(by_point[(n, phi, s)]) if (n, phi, s) in by_point else np.nan for s in stresses
@@ -103,45 +102,55 @@ def render(rows: list[dict], extra: list[dict], command: str) -> str:
         grid = sum(medians[s] for s in planned[phi] if np.isfinite(medians[s]))
         grid *= SEEDS_PLANNED.get(n, 1) * planned_strain[(n, phi)] / 3600
         partial = "≥ " if any(np.isnan(medians[s]) for s in planned[phi]) else ""
-        cells = " | ".join("–" if np.isnan(medians[s]) else f"{medians[s]:.0f}" for s in stresses)
-        lines.append(
-            f"| {n} | {phi:.2f} | {cells} | {planned_strain[(n, phi)]:g} | {recorded[(n, phi)] / 3600:.2f} | "
-            f"{partial}{grid:.2f} |"
+        cells = ["–" if np.isnan(medians[s]) else f"{medians[s]:.0f}" for s in stresses]
+        body.append(
+            [
+                f"{n}",
+                f"{phi:.2f}",
+                *cells,
+                f"{planned_strain[(n, phi)]:g}",
+                f"{recorded[(n, phi)] / 3600:.2f}",
+            ]
+            + [f"{partial}{grid:.2f}"]
         )
+    blocks.append(table(header, body))
     if extra:
-        lines += [
-            "",
-            "Runs outside the dataset (`--extra`), CPU seconds per unit strain reached:",
-            "",
-            "| N | φ | σ/σ0 | seed | scheme | disp_max | status | strain | CPU s/strain |",
-            "|---|---|---|---|---|---|---|---|---|",
-        ]
+        blocks.append("\nRuns outside the dataset (`--extra`), CPU seconds per unit strain reached:\n")
+        header = ["N", "φ", "σ/σ0", "seed", "scheme", "disp_max", "status", "strain", "CPU s/strain"]
+        body = []
         for r in sorted(
             extra, key=lambda r: (r["n"], r["phi"], -r["stress"], r["seed"], r["scheme"], -r["disp"])
         ):
-            lines.append(
-                f"| {r['n']} | {r['phi']:.2f} | {r['stress']:g} | {r['seed']} | {r['scheme']} | "
-                f"{r['disp']:g} | "
-                f"{r['status']} | {r['strain']:.2f} | {r['cost']:.0f} |"
+            body.append(
+                [
+                    f"{r['n']}",
+                    f"{r['phi']:.2f}",
+                    f"{r['stress']:g}",
+                    f"{r['seed']}",
+                    r["scheme"],
+                    f"{r['disp']:g}",
+                ]
+                + [r["status"], f"{r['strain']:.2f}", f"{r['cost']:.0f}"]
             )
-    lines += ["", f"Command: `{command}`"]
-    return "\n".join(lines)
+        blocks.append(table(header, body))
+    blocks.append(f"\nCommand: `{command}`")
+    return blocks
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--index", default="data/paper/index.json")
     ap.add_argument("--extra", default=None, help="glob of further trajectory files (e.g. a scheme study)")
     ap.add_argument("--no-write", action="store_true")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     rows = dataset_rows(ROOT / args.index)
     extra = extra_rows(str(ROOT / args.extra)) if args.extra else []
     command = (
-        "python bench/campaign_cost.py --index "
+        "python -m bench.campaign_cost --index "
         + args.index
         + (f" --extra '{args.extra}'" if args.extra else "")
     )
-    publish("campaign_cost", render(rows, extra, command), write=not args.no_write)
+    publish("campaign_cost", render(rows, extra, command), write=not args.no_write, command=command)
 
 
 if __name__ == "__main__":

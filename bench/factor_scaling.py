@@ -1,7 +1,7 @@
 """Why a step costs more per particle in a larger box: the sparse Cholesky factor of the resistance
 matrix, per N, on the matrix of a flowing configuration.
 
-    python bench/factor_scaling.py --n 400 2000 8000 20000 --page jamming.md
+    python -m bench.factor_scaling --n 400 2000 8000 20000 --page jamming.md
 
 Per N: a φ = 0.76, σ/σ0 = 200 run (implicit, disp_max 2e-3) is stepped past its start-up (``--warmup``
 steps), then its current matrix is analysed (CHOLMOD, nested dissection, supernodal: the simulator's
@@ -26,8 +26,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
-from publishing import command_line, publish
 
+from bench.publishing import command_line, publish, table
 from rheograph.sim import SimParams, Simulation  # noqa: E402
 from rheograph.sim.params import scheme_settings  # noqa: E402
 
@@ -87,7 +87,7 @@ def main(argv=None) -> None:
         default=["nesdis"],
         help="CHOLMOD orderings to compare (the simulator uses nesdis), e.g. nesdis metis amd",
     )
-    ap.add_argument("--page", default="jamming.md", help="docs page with the marked section")
+    ap.add_argument("--page", default=None, help="docs page with the marked section (default: its record's)")
     ap.add_argument("--section", default="factor_scaling")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
@@ -107,22 +107,22 @@ def main(argv=None) -> None:
         f"One numeric factorisation of the resistance matrix (CHOLMOD, nested dissection, supernodal) of a "
         f"flowing φ = 0.76, σ/σ0 = 200 configuration (implicit, disp_max 2e-3, {args.warmup} steps past "
         f"the start), CPU time per particle (median of {args.windows} windows); work = Σ_j c_j² over the "
-        f"columns of L.  Ratios to N = {min(args.n)} with the same ordering.",
-        "",
-        "| N | ordering | nnz(L) per particle | work per particle (flop) | ratio | µs per particle | ratio "
-        "| GFlop/s | analysis ms |",
-        "|---|---|---|---|---|---|---|---|---|",
+        f"columns of L.  Ratios to N = {min(args.n)} with the same ordering.\n",
     ]
+    header = ["N", "ordering", "nnz(L) per particle", "work per particle (flop)", "ratio", "µs per particle"]
+    header += ["ratio", "GFlop/s", "analysis ms"]
+    body = []
     for r in rows:
         base = first[r["ordering"]]
-        lines.append(
-            f"| {r['n']} | {r['ordering']} | {r['nnz_per_particle']:.0f} | {r['flops_per_particle']:.3g} | "
-            f"{r['flops_per_particle'] / base['flops_per_particle']:.2f} | {r['us_per_particle']:.2f} | "
-            f"{r['us_per_particle'] / base['us_per_particle']:.2f} | {r['gflops']:.1f} | "
-            f"{r['analysis_ms']:.1f} |"
+        body.append(
+            [f"{r['n']}", r["ordering"], f"{r['nnz_per_particle']:.0f}", f"{r['flops_per_particle']:.3g}"]
+            + [f"{r['flops_per_particle'] / base['flops_per_particle']:.2f}", f"{r['us_per_particle']:.2f}"]
+            + [f"{r['us_per_particle'] / base['us_per_particle']:.2f}", f"{r['gflops']:.1f}"]
+            + [f"{r['analysis_ms']:.1f}"]
         )
-    lines += ["", f"Command: `{command_line('factor_scaling.py', argv)}`"]
-    publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
+    command = command_line("factor_scaling", argv)
+    lines += [table(header, body), f"\nCommand: `{command}`"]
+    publish(args.section, lines, not args.no_write, page=args.page, command=command)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Finite-size effects: the steady η_r, Π and Z_μ of the same state points at N = 400 … 20 000, and how
 often a run arrests (shear-jams) at each N.
 
-    python bench/finite_size.py data/paper/multirun data/large_n/multirun
+    python -m bench.finite_size data/paper/multirun data/large_n/multirun
 
 Every state point (φ, μ, σ/σ0, disp_max, scheme) simulated at ``--min-sizes`` or more N is a row per
 N, with the slowest shear rate its flowing runs recorded: seeds pooled as in the flow curves (mean;
@@ -18,8 +18,10 @@ import sys
 from collections import defaultdict
 
 import numpy as np
-from publishing import command_line, publish
 from scipy.stats import binomtest
+
+from bench.publishing import Section, command_line, publish
+from bench.publishing import table as table_block
 
 
 def fmt(value: float, se: float) -> str:
@@ -35,27 +37,25 @@ def _two_digits(value: float) -> str:
     return "—" if not np.isfinite(value) else f"{float(f'{value:.2g}'):#.2g}".rstrip(".")
 
 
-def table(points, min_sizes: int) -> list[str]:
+def table(points, min_sizes: int) -> dict:
+    """A table block: the steady values of every state point simulated at ``min_sizes`` or more N."""
     by_state = defaultdict(list)
     for p in points:
         by_state[(p["phi"], p["mu"], p["stress"], p["disp_max"], p["integrator"])].append(p)
-    lines = [
-        "| φ | μ | σ/σ0 | scheme | disp_max | N | runs (arrested) | strain | η_r | Π/σ0 | Z_μ "
-        "| slowest γ̇ η0/σ0 |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+    header = ["φ", "μ", "σ/σ0", "scheme", "disp_max", "N", "runs (arrested)", "strain", "η_r", "Π/σ0", "Z_μ"]
+    header.append("slowest γ̇ η0/σ0")
+    body = []
     for (phi, mu, stress, disp, scheme), members in sorted(by_state.items()):
         if len({p["n_particles"] for p in members}) < min_sizes:
             continue
         for p in sorted(members, key=lambda q: q["n_particles"]):
-            lines.append(
-                f"| {phi:g} | {mu:g} | {stress:g} | {scheme} | {disp:g} | {p['n_particles']} | "
-                f"{p['n_runs']} ({p['n_jammed']}) | "
-                f"{p['strain']:.2f} | {fmt(p['viscosity'], p['viscosity_se'])} | "
-                f"{fmt(p['pressure'], p['pressure_se'])} | {fmt(p['z_mu'], p['z_mu_se'])} | "
-                f"{_two_digits(p['slowest_rate'])} |"
+            body.append(
+                [f"{phi:g}", f"{mu:g}", f"{stress:g}", scheme, f"{disp:g}", f"{p['n_particles']}"]
+                + [f"{p['n_runs']} ({p['n_jammed']})", f"{p['strain']:.2f}"]
+                + [fmt(p["viscosity"], p["viscosity_se"]), fmt(p["pressure"], p["pressure_se"])]
+                + [fmt(p["z_mu"], p["z_mu_se"]), _two_digits(p["slowest_rate"])]
             )
-    return lines
+    return table_block(header, body)
 
 
 def arrest_table(points, phi: float) -> list[str]:
@@ -108,23 +108,26 @@ def main(argv=None) -> int:
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     points = state_points(args.directories)
-    lines = [
+    out = Section(
         f"Steady values (strain ≥ each run's steady_state_strain) of the state points simulated at "
         f"{args.min_sizes} or more N; mean ± error over seeds and strain blocks; arrested runs counted, "
         "not averaged into η_r (— where every run arrested); slowest γ̇: the lowest shear rate recorded "
         "(every output row) by any flowing run of the state point in that window — how close the flow came "
         "to arresting; a minimum over more seeds or rows tends to be lower.",
         "",
-        *table(points, args.min_sizes),
+    )
+    out.table(**table(points, args.min_sizes)["table"])
+    # the arrest table keeps its published form (empty cells of two spaces): prose lines
+    out.add(
         "",
         f"Arrested runs / finished runs at φ = {args.arrest_phi:g} (every stress and N simulated there; a "
         "run stopped early decides nothing yet):",
         "",
         *arrest_table(points, args.arrest_phi),
-    ]
-    command = command_line("finite_size.py", argv)
-    lines += ["", f"Command: `{command}`"]
-    publish("finite_size", "\n".join(lines), not args.no_write, page="jamming.md")
+    )
+    command = command_line("finite_size", argv)
+    out.add("", f"Command: `{command}`")
+    publish("finite_size", out, not args.no_write, page="jamming.md", command=command)
     return 0
 
 

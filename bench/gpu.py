@@ -1,8 +1,8 @@
 """Training and prediction on a GPU against the CPU, in one run: JSON results, a table for the docs.
 
-    PYTHONPATH=src python bench/gpu.py --device cuda --out gpu.json        # about 6 min on one GPU
-    PYTHONPATH=src python bench/gpu.py --device cpu --quick --out q.json   # a smoke run of every part
-    PYTHONPATH=src python bench/gpu_report.py gpu.json                    # the markdown table
+    PYTHONPATH=src python -m bench.gpu --device cuda --out gpu.json        # about 6 min on one GPU
+    PYTHONPATH=src python -m bench.gpu --device cpu --quick --out q.json   # a smoke run of every part
+    PYTHONPATH=src python -m bench.gpu_report gpu.json                    # the markdown table
 
 All on the committed φ = 0.76, N = 400 set with ``experiment=demo`` settings (width 32, 60 epochs, five
 folds of held-out trajectories); the graph cache is built first, into a fresh directory, and timed on
@@ -300,7 +300,7 @@ def end_to_end(cache_dir: Path, device: torch.device, work: Path, quick: bool) -
     run_dir = work / f"c_{device.type}"
     shutil.rmtree(run_dir, ignore_errors=True)
     # on a GPU what its users run (experiment=demo_gpu: the GPU trainer, batch 128); on the CPU the demo
-    # in one fold process (its two-process wall is in docs/benchmarks.md)
+    # in one fold process (its two-process wall is in docs/validation/surrogate_cost.md)
     settings = ["experiment=demo_gpu"] if device.type == "cuda" else ["experiment=demo", "fold_workers=1"]
     command = [
         sys.executable,

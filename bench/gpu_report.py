@@ -1,6 +1,6 @@
 """The markdown tables of a ``bench/gpu.py`` JSON file (for docs/howto/gpu.md).
 
-python bench/gpu_report.py gpu.json            # markdown on stdout
+python -m bench.gpu_report gpu.json            # markdown on stdout
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """What a larger box costs: CPU per particle-step, peak memory, Cholesky fill and output size per run,
 against N, from finished (or checkpointed) runs at the same state points, all from one machine.
 
-    python bench/large_n.py data/paper/multirun data/large_n/multirun --phi 0.76
+    python -m bench.large_n data/paper/multirun data/large_n/multirun --phi 0.76
 
 Per run: CPU seconds and steps recorded in the trajectory (``summary/cpu_seconds``, ``summary/steps``;
 for a run still going, its last checkpoint's counters), the peak resident memory of the process that
@@ -21,7 +21,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import command_line, publish, table
 
 
 def run_cost(path: Path) -> dict | None:
@@ -99,25 +100,36 @@ def main(argv=None) -> int:
         "N = 400 at the same stress.  Fill: CHOLMOD (nested dissection) from one step of the run's last "
         "checkpoint; factor MB: its values at 8 bytes each.  Peak memory: the high-water mark of the "
         "process that ran the sweep (the ~300 MB of imported libraries included; runs of one sweep share "
-        "a process).",
-        "",
-        "| σ/σ0 | disp_max | N | status | strain | CPU s/strain | steps/strain | µs/particle-step | "
-        "ratio to N = 400 | peak memory MB | fill nnz(L)/nnz(A) | nnz(L)/dof | factor MB | file MB |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "a process).\n",
     ]
+    header = ["σ/σ0", "disp_max", "N", "status", "strain", "CPU s/strain", "steps/strain", "µs/particle-step"]
+    header += [
+        "ratio to N = 400",
+        "peak memory MB",
+        "fill nnz(L)/nnz(A)",
+        "nnz(L)/dof",
+        "factor MB",
+        "file MB",
+    ]
+    body = []
     for r in rows:
         per = 1e6 * r["cpu"] / (r["steps"] * r["n"])
         ref = reference.get((r["stress"], r["disp_max"]))
         ratio = per / (1e6 * ref["cpu"] / (ref["steps"] * ref["n"])) if ref else np.nan
-        lines.append(
-            f"| {r['stress']:g} | {r['disp_max']:g} | {r['n']} | {r['status']} | {r['strain']:.2f} | "
-            f"{r['cpu'] / r['strain']:.1f} | "
-            f"{r['steps'] / r['strain']:.0f} | {per:.2f} | {ratio:.2f} | {r['peak_mb']:.0f} | "
-            f"{r['fill']:.2f} | {r['nnz_per_dof']:.1f} | {r['factor_mb']:.1f} | {r['size_mb']:.1f} |"
+        body.append(
+            [f"{r['stress']:g}", f"{r['disp_max']:g}", f"{r['n']}", r["status"], f"{r['strain']:.2f}"]
+            + [
+                f"{r['cpu'] / r['strain']:.1f}",
+                f"{r['steps'] / r['strain']:.0f}",
+                f"{per:.2f}",
+                f"{ratio:.2f}",
+            ]
+            + [f"{r['peak_mb']:.0f}", f"{r['fill']:.2f}", f"{r['nnz_per_dof']:.1f}", f"{r['factor_mb']:.1f}"]
+            + [f"{r['size_mb']:.1f}"]
         )
-    command = command_line("large_n.py", argv)
-    lines += ["", f"Command: `{command}`"]
-    publish("large_n_cost", "\n".join(lines), not args.no_write, page="jamming.md")
+    command = command_line("large_n", argv)
+    lines += [table(header, body), f"\nCommand: `{command}`"]
+    publish("large_n_cost", lines, not args.no_write, page="jamming.md", command=command)
     return 0
 
 

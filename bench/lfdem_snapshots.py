@@ -2,20 +2,20 @@
 positions), scored against LF_DEM's own η_r, Π and Z_μ, beside the physics-only rows; and the cost of
 predicting 1000 snapshots.
 
-    python bench/lfdem_snapshots.py --runs /work/lfdem_runs/s*/par_*.dat --model N400_phi0.76
+    python -m bench.lfdem_snapshots --runs /work/lfdem_runs/s*/par_*.dat --model N400_phi0.76
 
 The LF_DEM runs are made outside the project (bench/vs_lfdem.py says how to build LF_DEM; configuration
 output every 0.1 strain, ``out_data_particle`` and ``out_data_interaction`` on).  Snapshots at strain >= 1
 (``--min-strain``) are scored: R² on log10 η_r and Π, linear Z_μ, over all runs together.  Physics-only
 rows need no training: the one-solve η_r, the contact-spring pressure and the counted Z_μ computed from
 the same positions (the ``eta_solve``, ``pressure_spring``, ``z_mu_counted`` columns of a
-prediction).  Results replace the marked section of docs/benchmarks.md unless ``--no-write``.
+prediction).  Results replace the marked section of docs/validation/position_noise.md unless ``--no-write``.
 
 With ``--noise ε`` Gaussian noise of ε per coordinate [a] (seeded, ``--seed``) is added to LF_DEM's
 positions and declared to the model with the rounding (``position_noise`` = √(rounding² + ε²)): an
 imaging model on snapshots of a code it was never trained on.
 
-    python bench/lfdem_snapshots.py --runs ... --model N400_phi0.76_imaging --noise 0.01 \
+    python -m bench.lfdem_snapshots --runs ... --model N400_phi0.76_imaging --noise 0.01 \
         --section lfdem_snapshots_imaging
 """
 
@@ -28,8 +28,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
-from zero_shot_n import lookup_mean  # noqa: E402
+
+from bench.publishing import command_line, publish
+from bench.publishing import table as table_block
+from bench.zero_shot_n import lookup_mean  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -97,7 +99,9 @@ def main(argv=None) -> int:
     ap.add_argument("--timing-snapshots", type=int, default=1000)
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian position noise per coordinate [a]")
     ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
-    ap.add_argument("--section", default="lfdem_snapshots", help="the marked section of docs/benchmarks.md")
+    ap.add_argument(
+        "--section", default="lfdem_snapshots", help="the marked section of docs/validation/position_noise.md"
+    )
     ap.add_argument(
         "--lookup",
         nargs="+",
@@ -144,13 +148,13 @@ def main(argv=None) -> int:
         rows.append(pred)
         physics.append(phys)
         true.append(sim)
-        row = (
-            f"| {snaps.stress:g} | {snaps.numerics.get('disp_max', float('nan')):g} | {keep.sum()} | "
-            f"{snaps.position_noise:.1e} | {sim[:, 0].mean():.1f} | {pred[:, 0].mean():.1f} | "
-            f"{sim[:, 1].mean():.2f} | {pred[:, 1].mean():.2f} | {sim[:, 2].mean():.3f} | "
-            f"{pred[:, 2].mean():.3f} | {table['in_domain'][keep].mean():.2f} |"
-            + (f" {looked_up[-1][0, 0]:.1f} |" if lookup else "")
-        )
+        row = [
+            f"{snaps.stress:g}", f"{snaps.numerics.get('disp_max', float('nan')):g}", f"{keep.sum()}",
+            f"{snaps.position_noise:.1e}", f"{sim[:, 0].mean():.1f}", f"{pred[:, 0].mean():.1f}",
+            f"{sim[:, 1].mean():.2f}", f"{pred[:, 1].mean():.2f}", f"{sim[:, 2].mean():.3f}",
+            f"{pred[:, 2].mean():.3f}", f"{table['in_domain'][keep].mean():.2f}",
+            *([f"{looked_up[-1][0, 0]:.1f}"] if lookup else []),
+        ]  # fmt: skip
         per_run.append((snaps.stress, row))
     seconds = time.perf_counter() - start
     pred, phys, sim = np.concatenate(rows), np.concatenate(physics), np.concatenate(true)
@@ -168,47 +172,44 @@ def main(argv=None) -> int:
     model.predict_snapshots(snaps)
     cost = time.perf_counter() - t0
 
-    command = command_line("lfdem_snapshots.py", argv)
+    command = command_line("lfdem_snapshots", argv)
     noise = (
         f", plus Gaussian noise of {args.noise:g} a per coordinate (seed {args.seed}) declared to the model"
         if args.noise > 0.0
         else ""
     )
-    lines = [
+    scored = [
+        [f"graph network ({args.model})", f"{net[0]:.4f}", f"{net[1]:.5f}", f"{net[2]:.5f}"],
+        ["physics only: one-solve η_r, contact-spring Π, counted Z_μ", f"{solve[0]:.4f}", f"{solve[1]:.5f}"]
+        + [f"{solve[2]:.5f}"],
+    ]
+    if lookup:
+        scored.append(
+            [
+                "lookup: mean of the rheograph runs at each σ",
+                *(f"{base[k]:.{d}f}" for k, d in enumerate((4, 5, 5))),
+            ]
+        )
+    per_run_header = ["σ/σ0", "LF_DEM disp_max", "snapshots", "position noise declared [a]", "η_r LF_DEM"]
+    per_run_header += ["η_r predicted", "Π LF_DEM", "Π predicted", "Z_μ LF_DEM", "Z_μ predicted", "in domain"]
+    per_run_header += ["η_r lookup"] if lookup else []
+    blocks = [
         f"### A shipped model on LF_DEM snapshots ({args.model}"
         + (f", ε = {args.noise:g} a)" if noise else ")"),
         "",
         f"{len(sim)} snapshots at strain ≥ {args.min_strain:g} of {len(rows)} LF_DEM runs, read from their "
         f"`par_*.dat` (positions to LF_DEM's 6 printed digits{noise}) with LF_DEM's own η_r = σ/γ̇, Π and Z_μ "
-        "(contact states of `int_*.dat`) as the truth; all runs scored together.",
+        "(contact states of `int_*.dat`) as the truth; all runs scored together.\n",
+        table_block(["predictor", "R² log η_r", "R² log Π", "R² Z_μ"], scored),
         "",
-        "| predictor | R² log η_r | R² log Π | R² Z_μ |",
-        "|---|---|---|---|",
-        f"| graph network ({args.model}) | {net[0]:.4f} | {net[1]:.5f} | {net[2]:.5f} |",
-        f"| physics only: one-solve η_r, contact-spring Π, counted Z_μ | {solve[0]:.4f} | {solve[1]:.5f} | "
-        f"{solve[2]:.5f} |",
-        *(
-            [
-                f"| lookup: mean of the rheograph runs at each σ | {base[0]:.4f} | {base[1]:.5f} | "
-                f"{base[2]:.5f} |"
-            ]
-            if lookup
-            else []
-        ),
-        "",
-        "| σ/σ0 | LF_DEM disp_max | snapshots | position noise declared [a] | η_r LF_DEM | η_r predicted | "
-        "Π LF_DEM | Π predicted | Z_μ LF_DEM | Z_μ predicted | in domain |"
-        + (" η_r lookup |" if lookup else ""),
-        "|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if lookup else ""),
-        *[row for _, row in sorted(per_run)],
-        "",
+        table_block(per_run_header, [row for _, row in sorted(per_run)]),
+        "\n"
         f"Prediction cost: {args.timing_snapshots} N = {snaps.n_particles} snapshots in {cost:.1f} s on one "
         f"core (one call, graphs built and the one-solve included; {1e3 * cost / args.timing_snapshots:.1f} "
-        f"ms per snapshot); the scored runs took {seconds:.0f} s including reading and warm-up.",
-        "",
+        f"ms per snapshot); the scored runs took {seconds:.0f} s including reading and warm-up.\n\n"
         f"Command: `{command}`",
     ]
-    publish(args.section, "\n".join(lines), not args.no_write)
+    publish(args.section, blocks, not args.no_write, command=command)
     return 0
 
 

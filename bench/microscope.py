@@ -10,8 +10,8 @@ minimum image): RMS error per coordinate, particles missed and spurious, species
 whose tracked particles do not give the stated φ (particles lost) is refused, as
 ``snapshot_from_frame`` refuses it, and counted.
 
-    python bench/microscope.py                         # the defaults: every steady test snapshot, ~12 min
-    python bench/microscope.py --every 1 --uniform-frames 20
+    python -m bench.microscope                         # the defaults: every steady test snapshot, ~12 min
+    python -m bench.microscope --every 1 --uniform-frames 20
 
 ``--uniform-frames K``: also K frames of uniformly dyed particles (dyed fraction 1), scored for tracking
 only.  Writes docs/results/microscope/<name>.json and .md unless ``--no-write``.
@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 ROOT = Path(__file__).resolve().parents[1]
-from publishing import command_line  # noqa: E402
+from bench.publishing import command_line  # noqa: E402
 
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
 MATCH_WITHIN = 0.5  # [a]: a tracked particle farther than this from every true one is spurious

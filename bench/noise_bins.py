@@ -7,7 +7,7 @@ the physics-only row — within bins of ε.  Nothing is relaxed or predicted aga
 snapshots cost a relaxation each (graph.relax_strain) gets its by-ε table without that cost; every
 predictor in a bin is scored on the same rows.
 
-    python bench/noise_bins.py docs/results/imaging/N2000_phi0.80_relaxed
+    python -m bench.noise_bins docs/results/imaging/N2000_phi0.80_relaxed
 
 The cache is the one training built (data/cache); where it is absent it is rebuilt first, at the cost
 of that build.  Results replace the marked section (``--section``) of ``--page`` unless ``--no-write``.
@@ -21,7 +21,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import Section, command_line, publish, table
 
 ROOT = Path(__file__).resolve().parents[1]
 # saved prediction arrays and the names the result tables give them
@@ -73,8 +74,8 @@ def fold_rows(run_dir: Path, k: int, cache_dir: Path) -> dict:
     return {"eps": eps, "flagged": flagged, **saved}
 
 
-def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
-    """Markdown table lines: every saved predictor's metrics within each ε bin of ``rows``, on the rows
+def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> dict:
+    """A table block: every saved predictor's metrics within each ε bin of ``rows``, on the rows
     the model does not flag (a relaxation short of its strain: an arrested packing)."""
     from rheograph.learn.module import fold_metrics
     from rheograph.naming import state_point_key
@@ -87,11 +88,12 @@ def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
     where[rows["flagged"]] = -1
     groups = state_point_key(rows["phi"], rows["stress"])
     counts = [int(np.sum(where == b)) for b in range(len(labels))]
-    header = " | ".join(
+    header = ["predictor", "metric"]
+    header += [
         f"ε {label} (n {n}" + (f", {f} flagged" if f else "") + ")"
         for label, n, f in zip(labels, counts, flagged)
-    )
-    lines = [f"| predictor | metric | {header} |", "|---|---|" + "---|" * len(labels)]
+    ]
+    body = []
     for key, name in PREDICTORS:
         if key not in rows:
             continue
@@ -105,9 +107,8 @@ def bin_table(rows: dict, edges: np.ndarray, labels: list[str]) -> list[str]:
             )
         for metric, label in METRICS:
             digits = 4 if metric.startswith("r2") else 3  # R² near 1: the fourth decimal decides
-            cells = " | ".join("–" if s is None else f"{s[metric]:.{digits}f}" for s in scores)
-            lines.append(f"| {name} | {label} | {cells} |")
-    return lines
+            body.append([name, label, *("–" if s is None else f"{s[metric]:.{digits}f}" for s in scores)])
+    return table(header, body)
 
 
 def main(argv=None) -> int:
@@ -129,7 +130,7 @@ def main(argv=None) -> int:
         help="leave out the rows at these σ/σ0 (e.g. a state point whose lookup is an arrested run's mean)",
     )
     ap.add_argument("--cache-dir", default=str(ROOT / "data" / "cache"))
-    ap.add_argument("--page", default="benchmarks.md", help="docs page with the marked section")
+    ap.add_argument("--page", default=None, help="docs page with the marked section (default: its record's)")
     ap.add_argument("--section", default="noise_bins")
     ap.add_argument("--title", default="Imaging models by noise level, from their own held-out predictions")
     ap.add_argument("--no-write", action="store_true")
@@ -142,7 +143,7 @@ def main(argv=None) -> int:
         if missing:
             sys.exit(f"noise_bins: {run} has no finished fold(s) {missing} (fold*_predictions.npz)")
     labels = [f"{lo:g}–{hi:g}" for lo, hi in zip(edges[:-1], edges[1:])]
-    lines = [
+    out = Section(
         f"### {args.title}",
         "",
         "Each fold's model on the noisy copies of its own test trajectories, as training scored them (ε "
@@ -153,7 +154,7 @@ def main(argv=None) -> int:
         "strain (an arrested or creeping packing) are predicted with that reason as out of the model's "
         "domain; they are counted (flagged) and not scored.",
         "",
-    ]
+    )
     for run in args.runs:
         run_dir = Path(run)
         folds = [fold_rows(run_dir, k, Path(args.cache_dir)) for k in args.folds]
@@ -169,9 +170,12 @@ def main(argv=None) -> int:
             title = f"**{run_dir.name}**" + (f", φ = {phi:g}" if len(phis) > 1 else "")
             if args.skip_stress:
                 title += f" (without σ/σ0 = {', '.join(f'{x:g}' for x in args.skip_stress)})"
-            lines += [title, "", *bin_table({k: v[at] for k, v in rows.items()}, edges, labels), ""]
-    lines.append(f"Command: `{command_line('noise_bins.py', argv)}`")
-    publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
+            out.add(title, "")
+            out.table(**bin_table({k: v[at] for k, v in rows.items()}, edges, labels)["table"])
+            out.add("")
+    command = command_line("noise_bins", argv)
+    out.add(f"Command: `{command}`")
+    publish(args.section, out, not args.no_write, page=args.page, command=command)
     return 0
 
 

@@ -3,12 +3,12 @@ coordinate, at φ = 0.70, 0.76 and 0.80 (N = 400, held-out trajectories), for th
 model on positions relaxed by a short shear, the imaging model, trees on descriptors of the noisy
 positions, gap-shell inputs (φ = 0.76) and the lookup of the training mean at (φ, σ).
 
-    python bench/noise_figure.py
+    python -m bench.noise_figure
 
 It draws the numbers that ``bench/snapshot_noise.py`` records for each run it scores
 (docs/results/bench/snapshot_noise/<run>.json, each with the command that made it; the same numbers as
-its tables in docs/benchmarks.md), so it costs no prediction: rerun those commands to refresh them, then
-this.  Writes docs/figures/imaging_noise.png (``--out``).
+its tables in docs/validation/position_noise.md), so it costs no prediction: rerun those commands to
+refresh them, then this.  Writes docs/figures/imaging_noise.png (``--out``).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from publishing import read_result_record
 
+from bench.publishing import read_result_record
 from rheograph.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]

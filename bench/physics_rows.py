@@ -4,11 +4,11 @@ contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ and the counted friction
 network's held-out R² from the run's metrics.json, and the share of the best physics-only row's residual
 variance that the network removes, 1 − (1 − R²_net) / (1 − R²_physics).
 
-    python bench/physics_rows.py docs/results/surrogate_per_phi/N400_phi0.76 [RUN ...]
+    python -m bench.physics_rows docs/results/surrogate_per_phi/N400_phi0.76 [RUN ...]
 
 Each fold's graphs are rebuilt from its split file (same files, same graph settings: the same order as
 in training) and scored with the training code's metrics (rheograph.learn.module.fold_metrics).  Results
-replace the marked section of docs/benchmarks.md unless ``--no-write``.
+replace the marked section of docs/validation/surrogate_accuracy.md unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
 
+from bench.publishing import command_line, publish
 from rheograph.learn.baselines import physics_fold_metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

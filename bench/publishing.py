@@ -1,36 +1,69 @@
-"""How a benchmark publishes: its table into a marked section of a docs page, its numbers into a JSON
-record under docs/results/bench/ (what figures and other benchmarks read), and the command that
-reproduces both."""
+"""How a benchmark publishes: a JSON record of its section under docs/results/bench/ (its tables as
+rows of cells, its prose, its raw numbers and the command that reproduces them), from which
+``bench.render`` draws the marked section of the docs page; never the other way round."""
 
 from __future__ import annotations
 
+import os
 import shlex
 import sys
 from pathlib import Path
 
+from bench.records import DOCS, RECORDS, Section, as_blocks, check_record, render_section, table, text
 from rheograph.io.pages import read_record, replace_section, write_record
 
+__all__ = ["Section", "command_line", "publish", "read_result_record", "record_path", "table", "text"]
+
 ROOT = Path(__file__).resolve().parents[1]
-RECORDS = ROOT / "docs" / "results" / "bench"
+# where records go instead (and no page is touched): bench.quick's temporary folder
+OUT_ENV = "RHEOGRAPH_BENCH_OUT"
 
 
 def command_line(script: str, argv=None) -> str:
-    """``python bench/<script> ARGS`` as the user typed it (``argv``, or the process's), less
-    ``--no-write``: the command that reproduces a published section."""
+    """``python -m bench.<script> ARGS`` as the user typed it (``argv``, or the process's), less
+    ``--no-write``: the command that reproduces a published section (``script`` with or without
+    its ``.py``)."""
     args = argv if argv is not None else sys.argv[1:]
-    return f"python bench/{script} {shlex.join([a for a in args if a != '--no-write'])}".rstrip()
+    module = script.removesuffix(".py")
+    return f"python -m bench.{module} {shlex.join([a for a in args if a != '--no-write'])}".rstrip()
 
 
 def publish(
-    section: str, text: str, write: bool, page: str = "benchmarks.md", record: dict | None = None
-) -> None:
-    """Print a result section and (unless the script's --no-write) replace it in docs/<page>, and
-    write ``record`` (its numbers) to docs/results/bench/<section>.json."""
-    print(text)
+    section: str,
+    content,
+    write: bool,
+    page: str | None = None,
+    record: dict | None = None,
+    command: str | None = None,
+) -> dict:
+    """Print a result section and (unless the benchmark's --no-write) keep it as the record
+    docs/results/bench/<section>.json and draw it into its page.
+
+    ``content``: the section's blocks (a :class:`Section`, or a list of :func:`table`, :func:`text` and
+    strings of prose); ``record``:
+    raw numbers kept beside them; ``page`` (under docs/): by default the page the section's record already
+    names.  Where ``$RHEOGRAPH_BENCH_OUT`` is set the record goes to that folder and no page is touched.
+    Returns the record."""
+    out = os.environ.get(OUT_ENV)
+    records = Path(out) if out else RECORDS
+    path = record_path(section, records)
+    if page is None:
+        known = record_path(section)
+        page = read_record(known, f"record of {section}")["page"] if known.exists() else None
+        if page is None and write:
+            raise SystemExit(f"{section}: no record names its page yet; pass page=")
+    full = dict(record or {})
+    blocks = as_blocks(content)
+    if command is None:
+        command = full.get("command")
+    full.update({"section": section, "page": page, "command": command, "blocks": blocks})
+    check_record(full, section)
+    print(render_section(full))
     if write:
-        replace_section(ROOT / "docs" / page, section, text)
-        if record is not None:
-            write_record(record_path(section), record)
+        write_record(path, full)
+        if not out:
+            replace_section(DOCS / page, section, render_section(full))
+    return full
 
 
 def record_path(name: str, records: Path = RECORDS) -> Path:

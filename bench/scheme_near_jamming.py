@@ -1,10 +1,10 @@
 """Near jamming the time-stepping scheme decides the physics: phi = 0.80, N = 400, eta_r(strain) from one
 and the same initial configuration for explicit Euler and linearly implicit springs at decreasing disp_max.
 
-    python bench/scheme_near_jamming.py run  [--stress 50 10] [--seeds 1 2] [--strain 1]
+    python -m bench.scheme_near_jamming run  [--stress 50 10] [--seeds 1 2] [--strain 1]
                                              [--schemes euler:1e-3 euler:5e-4 euler:2.5e-4 implicit:2e-3 ...]
                                              [--max-wall 1800]
-    python bench/scheme_near_jamming.py plot  # docs/figures/scheme_near_jamming.png + markdown table
+    python -m bench.scheme_near_jamming plot  # docs/figures/scheme_near_jamming.png + markdown table
 
 Every (seed, stress, scheme, disp_max) is one resumable trajectory under data/scheme_phi080/<run name>/
 (the layout simulate.py writes, so runs made with ``python simulate.py ... output_root=data/scheme_phi080``

@@ -1,7 +1,7 @@
 """A short 3D run: relative viscosity, Pi / sigma, Z_mu and the cost per step of the 3D simulator.
 
-    python bench/short_run_3d.py                                  # N = 300, phi 0.5, sigma/sigma0 10
-    python bench/short_run_3d.py --n 500 --steps 600 --warmup 200
+    python -m bench.short_run_3d                                  # N = 300, phi 0.5, sigma/sigma0 10
+    python -m bench.short_run_3d --n 500 --steps 600 --warmup 200
 
 A smoke benchmark of one state point, not a converged measurement: a few hundred steps cover a strain of
 ~0.1 to 0.5 after the start-up transient, so the averages are of the early flow.  Averages are over the

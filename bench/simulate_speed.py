@@ -1,12 +1,12 @@
 """Simulator speed: wall and CPU seconds per unit strain, per particle-step, with a per-phase breakdown,
 at phi = 0.76, sigma/sigma0 = 10 (the LF_DEM reference point) for several N and disp_max.
 
-    python bench/simulate_speed.py                      # N = 400, 1000, 2000; disp_max 2e-3, 1e-3
-    python bench/simulate_speed.py --n 400 --disp 2e-3  # a subset
+    python -m bench.simulate_speed                      # N = 400, 1000, 2000; disp_max 2e-3, 1e-3
+    python -m bench.simulate_speed --n 400 --disp 2e-3  # a subset
 
 Each case is warmed up (past the frictionless start-up transient, numba compiled) and then timed over
 ``--windows`` consecutive strain windows; medians are reported.  Results replace the marked section of
-docs/benchmarks.md.  Run it alone on the machine: timings of a shared machine are noisy.
+docs/validation/speed.md.  Run it alone on the machine: timings of a shared machine are noisy.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate.py)
 
 import numpy as np  # noqa: E402
-from publishing import replace_section
 
+from bench.publishing import publish, table
 from rheograph.sim import SimParams, Simulation  # noqa: E402
 from rheograph.sim.params import scheme_settings  # noqa: E402
 
@@ -64,7 +64,7 @@ def measure(n, disp, scheme, solver, skin, warmup, window, windows):
     return {k: float(np.median([r[k] for r in results])) for k in results[0]}
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[400, 1000, 2000])
     ap.add_argument("--disp", type=float, nargs="+", default=[2e-3, 1e-3])
@@ -80,17 +80,12 @@ def main() -> None:
     ap.add_argument("--windows", type=int, default=3)
     ap.add_argument("--particle-steps", type=float, default=3e6, help="work per timing window")
     ap.add_argument("--no-write", action="store_true")
-    args = ap.parse_args()
-    lines = [
-        f"Machine: {os.cpu_count()} cores, single-threaded simulator "
-        "(OPENBLAS_NUM_THREADS=OMP_THREAD_LIMIT=1); "
-        f"φ = 0.76, σ/σ0 = 10; medians of {args.windows} windows after {args.warmup} strain of warm-up.",
-        "",
-        "| N | disp_max | integrator | solver | skin | wall s/strain | CPU s/strain "
-        "| steps/strain | ms/step | µs/particle-step "
-        "| neighbours | assembly | factorise | solve | stress | update |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+    args = ap.parse_args(argv)
+    header = [
+        "N", "disp_max", "integrator", "solver", "skin", "wall s/strain", "CPU s/strain", "steps/strain",
+        "ms/step", "µs/particle-step", "neighbours", "assembly", "factorise", "solve", "stress", "update",
+    ]  # fmt: skip
+    rows, measured = [], []
     cases = [
         (integrator, disp, n, solver, skin)
         for integrator in args.integrators
@@ -103,28 +98,36 @@ def main() -> None:
         # strain window holding about --particle-steps particle-steps (~15 steps per 1e-3 strain)
         window = max(0.01, args.particle_steps / (n * 15.0 / disp * 1e-3) * 1e-3)
         r = measure(n, disp, integrator, solver, skin, args.warmup, window, args.windows)
-        line = (
-            f"| {n} | {disp:g} | {integrator} | {solver} | {skin:g} | {r['wall_per_strain']:.1f} | "
-            f"{r['cpu_per_strain']:.1f} | "
-            f"{r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | "
-            f"{r['us_per_particle_step']:.2f} | "
-            + " | ".join(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES)
-            + " |"
+        row = [
+            f"{n}", f"{disp:g}", integrator, solver, f"{skin:g}", f"{r['wall_per_strain']:.1f}",
+            f"{r['cpu_per_strain']:.1f}", f"{r['steps_per_strain']:.0f}", f"{r['ms_per_step']:.2f}",
+            f"{r['us_per_particle_step']:.2f}", *(f"{100 * r['frac_' + k]:.0f}%" for k in PHASES),
+        ]  # fmt: skip
+        print(" | ".join(row), flush=True)
+        rows.append(row)
+        measured.append(
+            {"n": n, "disp_max": disp, "integrator": integrator, "solver": solver, "skin": skin, **r}
         )
-        print(line, flush=True)
-        lines.append(line)
-    lines += [
-        "",
-        "Command: `python bench/simulate_speed.py "
-        + " ".join(
-            f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
-            for k, v in vars(args).items()
-            if k != "no_write"
-        )
-        + "`",
+    command = "python -m bench.simulate_speed " + " ".join(
+        f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
+        for k, v in vars(args).items()
+        if k != "no_write"
+    )
+    blocks = [
+        f"Machine: {os.cpu_count()} cores, single-threaded simulator "
+        "(OPENBLAS_NUM_THREADS=OMP_THREAD_LIMIT=1); "
+        f"φ = 0.76, σ/σ0 = 10; medians of {args.windows} windows after {args.warmup} strain of warm-up.\n",
+        table(header, rows),
+        f"\nCommand: `{command}`",
     ]
-    if not args.no_write:
-        replace_section(ROOT / "docs" / "benchmarks.md", "simulate_speed", "\n".join(lines))
+    publish(
+        "simulate_speed",
+        blocks,
+        not args.no_write,
+        page="validation/speed.md",
+        record={"measured": measured},
+        command=command,
+    )
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ and gradient-boosted trees on the eight descriptors computed from the noisy posi
 exact training snapshots).  Per target: R² (log10 for η_r and Π), the within-state fluctuation
 correlation and the share within ±15 %.
 
-    python bench/snapshot_noise.py docs/results/pressure_on_spring/N400_phi0.76 \\
+    python -m bench.snapshot_noise docs/results/pressure_on_spring/N400_phi0.76 \\
         docs/results/surrogate_study/physics_grouped --noise 0 0.001 0.003 0.01 0.03 0.05
 
 With ``--relax-strain Δγ`` a run whose model reads exact positions is also scored on the noisy
@@ -15,7 +15,7 @@ positions after a shear of Δγ under the simulator's own dynamics at the impose
 closed again), on every ``--relax-every``-th test snapshot (about 0.4 s each at N = 400).
 
 One noise draw per (ε, snapshot), seeded (``--seed``).  Results replace the marked section
-(``--section``) of docs/benchmarks.md unless ``--no-write``.
+(``--section``) of docs/validation/position_noise.md unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish, write_result_record
+
+from bench.publishing import Section, command_line, publish, write_result_record
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "docs" / "results" / "bench" / "snapshot_noise"  # per run, read by bench/noise_figure.py
@@ -186,11 +187,13 @@ def main(argv=None) -> int:
     ap.add_argument("--relax-strain", type=float, default=0.0, help="also score relaxed positions (0: no)")
     ap.add_argument("--relax-every", type=int, default=4, help="relax every n-th test snapshot")
     ap.add_argument("--workers", type=int, default=1, help="folds scored in parallel processes")
-    ap.add_argument("--section", default="snapshot_noise", help="the marked section of docs/benchmarks.md")
+    ap.add_argument(
+        "--section", default="snapshot_noise", help="the marked section of docs/validation/position_noise.md"
+    )
     ap.add_argument("--title", default="Position noise: how far the surrogates read imprecise snapshots")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
-    lines = [
+    out = Section(
         f"### {args.title}",
         "",
         "Held-out test trajectories of each run, Gaussian noise ε per coordinate (units of a) on their "
@@ -198,7 +201,7 @@ def main(argv=None) -> int:
         "snapshots (fluct.: correlation of predicted and true deviations from the state-point mean; ±15 %: "
         "share of η_r within ±15 %).",
         "",
-    ]
+    )
     records: dict = {}  # {run: {predictor: {metric: [value per ε]}}}
     for run in args.runs:
         run_dir = Path(run)
@@ -214,13 +217,8 @@ def main(argv=None) -> int:
             for key, value in rows.items():
                 pooled.setdefault(key, []).append(value)
         predictors = list(dict.fromkeys(name for name, _ in pooled))
-        header = " | ".join(f"ε = {eps:g}" for eps in args.noise)
-        lines += [
-            f"**{run_dir.name}**",
-            "",
-            f"| predictor | metric | {header} |",
-            "|---|---|" + "---|" * len(args.noise),
-        ]
+        out.add(f"**{run_dir.name}**", "")
+        body = []
         for name in predictors:
             scores = {}
             for eps in args.noise:
@@ -240,12 +238,12 @@ def main(argv=None) -> int:
             for key, label in (*rows_of, ("within15_eta", "±15 % η_r")):
                 values = [round(float(scores[eps][key]), 3) for eps in args.noise]
                 records.setdefault(run_dir.name, {}).setdefault(name, {})[label] = values
-                cells = " | ".join(f"{value:.3f}" for value in values)
-                lines.append(f"| {name} | {label} | {cells} |")
-        lines.append("")
-    command = command_line("snapshot_noise.py", argv)
-    lines.append(f"Command: `{command}`")
-    publish(args.section, "\n".join(lines), not args.no_write)
+                body.append([name, label, *(f"{value:.3f}" for value in values)])
+        out.table(["predictor", "metric", *(f"ε = {eps:g}" for eps in args.noise)], body)
+        out.add("")
+    command = command_line("snapshot_noise", argv)
+    out.add(f"Command: `{command}`")
+    publish(args.section, out, not args.no_write, command=command)
     if not args.no_write:  # each run's numbers, as its table prints them, for bench/noise_figure.py
         for run, predictors in records.items():
             record = dict(command=f"`{command}`", noise=list(args.noise), predictors=predictors)

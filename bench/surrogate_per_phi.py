@@ -2,9 +2,9 @@
 mean ± std over the 5 test folds, one model per (φ, N), with the paper's reported values beside ours.
 Each (φ, N) run keeps its report (Fig. 4 parity with ±15 % bands, Fig. 6 flow curves, MAE distributions)
 under docs/results/surrogate_per_phi/N<N>_phi<φ>/; the table replaces the ``surrogate_per_phi`` section of
-docs/benchmarks.md and the figure is docs/figures/surrogate_r2_vs_phi.png.
+docs/validation/surrogate_accuracy.md and the figure is docs/figures/surrogate_r2_vs_phi.png.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/surrogate_per_phi.py --n 400 --phi 0.70 0.72 0.74 0.76 \\
+    OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_per_phi --n 400 --phi 0.70 0.72 0.74 0.76 \\
         [--split grouped random] [--epochs 60] [extra train.py overrides after --]
 
 Both protocols in one table: ``grouped`` (whole trajectories held out: the estimate that counts) and
@@ -25,9 +25,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-from publishing import publish
-from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
+from bench.publishing import publish
+from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.io.index import read_index  # noqa: E402
 from rheograph.learn.train import run_stamps, stamps_differ  # noqa: E402
 
@@ -183,10 +183,10 @@ def write(results: dict, args) -> None:
         ]
     lines += [
         "",
-        "![R² vs φ](figures/surrogate_r2_vs_phi.png)",
+        "![R² vs φ](../figures/surrogate_r2_vs_phi.png)",
         "",
         "Per-(φ, N) reports (parity, flow curves, MAE distributions): docs/results/surrogate_per_phi/.  "
-        "Command: `python bench/surrogate_per_phi.py --n "
+        "Command: `python -m bench.surrogate_per_phi --n "
         + " ".join(str(n) for n in sorted({n for _, n, _ in results}))
         + " --phi "
         + " ".join(f"{p:g}" for p in sorted({p for _, _, p in results}))

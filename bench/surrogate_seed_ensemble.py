@@ -4,10 +4,10 @@ the M models (log η_r and log Π averaged in log space, Z_μ linearly).  The de
 (``predict.py``) already averages the K fold models; this measures what averaging buys on trajectories
 no member has seen, which a single model's held-out score does not show.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/surrogate_seed_ensemble.py --phi 0.70 --seeds 0 1 2
+    OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_seed_ensemble --phi 0.70 --seeds 0 1 2
 
 Each seed's run is kept under docs/results/seed_ensemble/N<N>_phi<φ>_seed<s>/ (finished folds are
-reused); the table replaces the ``seed_ensemble`` section of docs/benchmarks.md.
+reused); the table replaces the ``seed_ensemble`` section of docs/validation/surrogate_accuracy.md.
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-from publishing import publish
-from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
+from bench.publishing import Section, publish
+from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.learn.module import fold_metrics  # noqa: E402
 from rheograph.naming import state_point_key  # noqa: E402
 
@@ -102,53 +102,55 @@ def main(argv=None) -> None:
         return f"{np.nanmean(v):.4f} ± {np.nanstd(v, ddof=1):.4f}"
 
     held_out = "whole trajectories held out" if args.split == "grouped" else "snapshots held out"
-    lines = [
+    out = Section(
         f"N = {args.n}, φ = {args.phi:.2f}, {args.split} split ({held_out}), "
         f"{len(folds)} folds, {args.epochs} epochs, model: {model_label(args.overrides)}; seeds "
         f"{args.seeds}.  Mean ± std over the test folds; the ensemble averages the "
         f"{len(args.seeds)} models of each fold (log η_r, log Π in log space).",
         "",
-        "| model | " + " | ".join(label for _, label in SCORES) + " | fluct. η_r |",
-        "|---|" + "---|" * (len(SCORES) + 1),
-    ]
+    )
+    body = []
     for m, seed in enumerate(args.seeds):
         rows = [members[m] for members, _ in per_fold]
-        lines.append(
-            f"| seed {seed} | "
-            + " | ".join(cell([r[key] for r in rows]) for key, _ in SCORES)
-            + f" | {cell([r['fluct_eta'] for r in rows])} |"
+        body.append(
+            [
+                f"seed {seed}",
+                *(cell([r[key] for r in rows]) for key, _ in SCORES),
+                cell([r["fluct_eta"] for r in rows]),
+            ]
         )
     mean_single = {
         key: [np.mean([r[key] for r in members]) for members, _ in per_fold]
         for key, _ in SCORES + (("fluct_eta", ""),)
     }
-    lines.append(
-        "| one model (mean over seeds) | "
-        + " | ".join(cell(mean_single[key]) for key, _ in SCORES)
-        + f" | {cell(mean_single['fluct_eta'])} |"
+    body.append(
+        ["one model (mean over seeds)", *(cell(mean_single[key]) for key, _ in SCORES)]
+        + [cell(mean_single["fluct_eta"])]
     )
     ens = [mean for _, mean in per_fold]
-    lines.append(
-        f"| **ensemble of {len(args.seeds)}** | "
-        + " | ".join(f"**{cell([r[key] for r in ens])}**" for key, _ in SCORES)
-        + f" | {cell([r['fluct_eta'] for r in ens])} |"
+    body.append(
+        [f"**ensemble of {len(args.seeds)}**", *(f"**{cell([r[key] for r in ens])}**" for key, _ in SCORES)]
+        + [cell([r["fluct_eta"] for r in ens])]
     )
+    out.table(["model", *(label for _, label in SCORES), "fluct. η_r"], body)
     gain = [e["r2_log_eta"] - s for e, s in zip(ens, mean_single["r2_log_eta"])]
-    lines += [
+    command = (
+        "python -m bench.surrogate_seed_ensemble --phi "
+        f"{args.phi:g} --n {args.n} --seeds {' '.join(map(str, args.seeds))} --epochs {args.epochs}"
+        + (" -- " + " ".join(args.overrides) if args.overrides else "")
+    )
+    out.add(
         "",
         f"Ensemble − one model, log η_r, per fold: {', '.join(f'{g:+.4f}' for g in gain)}.",
         "",
-        "Command: `python bench/surrogate_seed_ensemble.py --phi "
-        f"{args.phi:g} --n {args.n} --seeds {' '.join(map(str, args.seeds))} --epochs {args.epochs}"
-        + (" -- " + " ".join(args.overrides) if args.overrides else "")
-        + "`",
-    ]
+        f"Command: `{command}`",
+    )
     (Path(args.out) / f"N{args.n}_phi{args.phi:g}.json").write_text(
         json.dumps(
             {"seeds": args.seeds, "folds": folds, "ensemble": ens, "one_model": mean_single}, default=float
         )
     )
-    publish("seed_ensemble", "\n".join(lines), not args.no_write)
+    publish("seed_ensemble", out, not args.no_write, command=command)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Fold-ensemble uncertainty on trajectories no model has seen, and the surrogate's speed-up over the
 simulator, measured in one run on this machine.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/surrogate_uncertainty.py --phi 0.76 --train-seeds 1 2 --test-seed 3
+    OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_uncertainty --phi 0.76 --train-seeds 1 2 --test-seed 3
 
 Trains the default 5-fold surrogate (held-out trajectories) on the seeds ``--train-seeds`` of one area
 fraction, then predicts every trajectory of ``--test-seed`` with the 5-model ensemble (``predict.py``'s
@@ -11,7 +11,7 @@ and the cross-validated error bar of the training run (rheograph.learn.error_mod
 held-out-trajectory residuals per state point).  Speed: wall
 seconds per predicted snapshot (graph building + 5 models) against the simulator's CPU seconds for one
 decorrelated snapshot (the runs' recorded CPU seconds per strain × the measured decorrelation strain).
-Replaces the ``surrogate_uncertainty`` section of docs/benchmarks.md.
+Replaces the ``surrogate_uncertainty`` section of docs/validation/surrogate_accuracy.md.
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
-from publishing import publish
-from surrogate_study import benchmark_config, train_or_resume  # noqa: E402
 
+from bench.publishing import publish
+from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.analysis.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
 from rheograph.io.snapshots import read_snapshots  # noqa: E402
 from rheograph.learn.error_model import error_scale  # noqa: E402
@@ -116,7 +116,7 @@ def main(argv=None) -> None:
         "(median over the test runs of recorded CPU s/strain × the 1/e decorrelation strain of log η_r): "
         f"**{np.median(finite) / per_snapshot:.0f}×**.",
         "",
-        f"Command: `python bench/surrogate_uncertainty.py --phi {args.phi} --n {args.n} --train-seeds "
+        f"Command: `python -m bench.surrogate_uncertainty --phi {args.phi} --n {args.n} --train-seeds "
         + " ".join(map(str, args.train_seeds))
         + f" --test-seed {args.test_seed} --epochs {args.epochs}`",
     ]

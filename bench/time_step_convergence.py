@@ -2,12 +2,12 @@
 explicit Euler with LF_DEM's lagged step control (``euler-lagged``, LF_DEM's discretisation), explicit
 Euler with the current-speed step control (``euler``) and linearly implicit springs (``implicit``).
 
-    python bench/time_step_convergence.py run  [--stress 10 200] [--disp 4e-3 2e-3 1e-3 5e-4]
+    python -m bench.time_step_convergence run  [--stress 10 200] [--disp 4e-3 2e-3 1e-3 5e-4]
                                                [--schemes euler-lagged euler implicit] [--seeds 1]
-    python bench/time_step_convergence.py plot  # docs/figures/time_step_convergence.png + markdown table
+    python -m bench.time_step_convergence plot  # docs/figures/time_step_convergence.png + markdown table
 
 Runs are resumable (one trajectory file per point under data/time_step/).  The cost axis is steps per unit
-strain: the cost of a step is the same for every scheme (docs/benchmarks.md, section 3), and, unlike wall
+strain: the cost of a step is the same for every scheme (docs/validation/speed.md), and, unlike wall
 seconds, it does not depend on the solver backend or on the machine's load; the wall seconds per strain
 recorded by this script are listed in the table with the backend that produced them.
 """

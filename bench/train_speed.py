@@ -1,14 +1,15 @@
 """Surrogate cost: what training costs, what makes it cheaper, and accuracy against size and speed.
 All on the committed paper-scale set (held-out whole trajectories, ``data.split=grouped``), this machine.
 
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py levers    # s/epoch of each speed lever, one fold
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py accuracy  # time to accuracy, before/after, N=400/2000
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py pareto    # R² vs inference ms and training minutes
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py folds     # K-fold wall time: fold processes vs one
-    OMP_WAIT_POLICY=PASSIVE python bench/train_speed.py inference # per-snapshot prediction vs simulation
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed levers    # s/epoch of each speed lever, one fold
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed accuracy  # time to accuracy, before/after, N=400/2000
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed pareto    # R² vs inference ms and training minutes
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed folds     # K-fold wall time: fold processes vs one
+    OMP_WAIT_POLICY=PASSIVE python -m bench.train_speed inference # per-snapshot prediction vs simulation
 
-Each subcommand writes its marked section of docs/benchmarks.md (``--no-write``: print only) and keeps its
-raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders from that file.
+Each subcommand writes its marked section of docs/validation/surrogate_cost.md (``--no-write``: print
+only) and keeps its raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders
+from that file.
 
 * ``levers``: seconds per training epoch (median of ``--repeats`` epochs after one warm-up epoch, one
   thread) of the default model on fold 0's training graphs for one lever at a time: ``torch.compile``
@@ -45,9 +46,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from publishing import replace_section
-from surrogate_study import VARIANTS, benchmark_config  # noqa: E402
 
+from bench.publishing import Section, publish, read_result_record
+from bench.training import VARIANTS, benchmark_config  # noqa: E402
 from rheograph.learn.module import regression_metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -215,22 +216,26 @@ def levers(args) -> list[str]:
     return rows
 
 
-def render_levers(rows, args) -> str:
-    lines = [
+def render_levers(rows, args) -> Section:
+    out = Section(
         "Seconds per training epoch of the default model (`model=resgcn_physics`, width 64, 2 layers) over "
         "fold 0's training graphs of φ = 0.76, one torch thread, median of "
         f"{args.repeats} epochs after a warm-up epoch.",
         "",
-        "| N | lever | training graphs | s/epoch | graphs/s |",
-        "|---|---|---|---|---|",
+    )
+    body = [
+        [
+            f"{r['n']}",
+            r["lever"],
+            f"{r['graphs']}",
+            f"{r['seconds']:.2f}",
+            f"{r['graphs'] / r['seconds']:.0f}",
+        ]
+        for r in rows
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['n']} | {r['lever']} | {r['graphs']} | {r['seconds']:.2f} | "
-            f"{r['graphs'] / r['seconds']:.0f} |"
-        )
-    lines += ["", f"Command: `{command_line()}`"]
-    return "\n".join(lines)
+    out.table(["N", "lever", "training graphs", "s/epoch", "graphs/s"], body)
+    out.add("", f"Command: `{command_line()}`")
+    return out
 
 
 # ---- time to accuracy -----------------------------------------------------------------------------------
@@ -258,8 +263,8 @@ def time_to(curve, key, target):
     return float("nan")
 
 
-def render_accuracy(rows, args) -> str:
-    lines = [
+def render_accuracy(rows, args) -> Section:
+    out = Section(
         f"Fold 0 of 5 (held-out whole trajectories), φ = {args.phi}, one torch thread.  *before*: constant "
         "learning rate, batch 16, early stopping with patience 50 (at most "
         f"{args.before_epochs} epochs); *after*: cosine schedule over {args.epochs} epochs, batch 32 "
@@ -267,29 +272,35 @@ def render_accuracy(rows, args) -> str:
         "Final = held-out R² of the best validation epoch; t(x) = training wall seconds until the held-out "
         "R² first reaches x × final.",
         "",
-        "| N | graphs | config | epochs run | train s | final R² log η_r / log Π / Z_μ "
-        "| t(0.9) s | t(0.95) s | t(0.99) s (slowest target) |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+    )
+    body = []
     for r in rows:
         final = " / ".join(f"{r['final'][k]:.3f}" for k in SCORES)
         times = []
         for frac in (0.9, 0.95, 0.99):
             per = [time_to(r["curve"], k, frac * r["final"][k]) for k in SCORES]
             times.append("–" if any(np.isnan(per)) else f"{max(per):.0f}")
-        lines.append(
-            f"| {r['n']} | {r['graphs']} | {r['label']} | {len(r['curve'])} | {r['seconds']:.0f} | {final} | "
-            + " | ".join(times)
-            + " |"
+        body.append(
+            [
+                f"{r['n']}",
+                f"{r['graphs']}",
+                r["label"],
+                f"{len(r['curve'])}",
+                f"{r['seconds']:.0f}",
+                final,
+                *times,
+            ]
         )
-    lines += [
+    header = ["N", "graphs", "config", "epochs run", "train s", "final R² log η_r / log Π / Z_μ", "t(0.9) s"]
+    out.table(header + ["t(0.95) s", "t(0.99) s (slowest target)"], body)
+    out.add(
         "",
-        "Figure: [figures/time_to_accuracy.png](figures/time_to_accuracy.png).",
+        "Figure: [figures/time_to_accuracy.png](../figures/time_to_accuracy.png).",
         "",
         f"Command: `{command_line()}`",
-    ]
+    )
     plot_accuracy(rows)
-    return "\n".join(lines)
+    return out
 
 
 def plot_accuracy(rows) -> None:
@@ -384,7 +395,7 @@ def pareto_front(points) -> list[int]:
     return front
 
 
-def render_pareto(rows, args) -> str:
+def render_pareto(rows, args) -> Section:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -420,31 +431,31 @@ def render_pareto(rows, args) -> str:
     )
     fig.tight_layout()
     fig.savefig(ROOT / "docs" / "figures" / "surrogate_pareto.png", dpi=110)
-    lines = [
+    out = Section(
         f"Fold 0 of 5 (held-out whole trajectories), φ = {args.phi}, N = 400, {args.epochs} epochs (cosine; "
         "the paper variant with its constant rate), batch 32, one torch thread.  ms per snapshot = graph "
         "building + forward pass batched over the test fold (batch 64).  The paper's size is 2 × 64.",
         "",
-        "| inputs | layers × width | parameters | R² log η_r | R² log Π | R² Z_μ | build ms | forward ms "
-        "| train min |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+    )
+    body = []
     for r in rows:
         s = r["scores"]
-        lines.append(
-            f"| {r['variant']} | {r['layers']} × {r['width']} | {r['parameters']} | {s['r2_log_eta']:.3f} | "
-            f"{s['r2_log_pressure']:.3f} | {s['r2_z_mu']:.3f} | {r['build_ms']:.2f} | "
-            f"{r['forward_ms']:.2f} | {r['train_minutes']:.1f} |"
+        body.append(
+            [r["variant"], f"{r['layers']} × {r['width']}", f"{r['parameters']}", f"{s['r2_log_eta']:.3f}"]
+            + [f"{s['r2_log_pressure']:.3f}", f"{s['r2_z_mu']:.3f}", f"{r['build_ms']:.2f}"]
+            + [f"{r['forward_ms']:.2f}", f"{r['train_minutes']:.1f}"]
         )
-    lines += [
+    header = ["inputs", "layers × width", "parameters", "R² log η_r", "R² log Π", "R² Z_μ", "build ms"]
+    out.table(header + ["forward ms", "train min"], body)
+    out.add(
         "",
-        "Figure: [figures/surrogate_pareto.png](figures/surrogate_pareto.png).",
+        "Figure: [figures/surrogate_pareto.png](../figures/surrogate_pareto.png).",
         "",
         "Command (rows accumulate in docs/results/train_speed/pareto.json): "
-        "`python bench/train_speed.py pareto "
+        "`python -m bench.train_speed pareto "
         f"--models {' '.join(args.models)}`",
-    ]
-    return "\n".join(lines)
+    )
+    return out
 
 
 # ---- speed-up over the simulator ------------------------------------------------------------------------
@@ -500,8 +511,8 @@ def inference(args) -> list[dict]:
     return rows
 
 
-def render_inference(rows, args) -> str:
-    lines = [
+def render_inference(rows, args) -> Section:
+    out = Section(
         f"φ = {args.phi}, default model (2 × 64, `graph=physics_solve`: graph building includes the one "
         "resistance solve per snapshot), one thread: every snapshot of a trajectory file predicted "
         "in one pass (read + graph building, batched forward, batches of 64 N = 400 / 12 N = 2000 graphs), "
@@ -509,17 +520,17 @@ def render_inference(rows, args) -> str:
         "Simulator: every run's recorded CPU s/strain × its 1/e decorrelation strain of log η_r (median "
         "over all runs of this (φ, N), every stress; implicit, disp_max 2e-3).",
         "",
-        "| N | files timed | snapshots | build ms | forward ms (1 model) | simulator CPU s per decorrelated "
-        "snapshot | speed-up, 1 model | speed-up, 5-model ensemble |",
-        "|---|---|---|---|---|---|---|---|",
+    )
+    body = [
+        [f"{r['n']}", f"{r['files']}", f"{r['snapshots']}", f"{r['build_ms']:.2f}", f"{r['forward_ms']:.2f}"]
+        + [f"{r['simulator_s']:.2f}", f"{r['speedup_one']:.0f}×", f"{r['speedup_ensemble']:.0f}×"]
+        for r in rows
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['n']} | {r['files']} | {r['snapshots']} | {r['build_ms']:.2f} | {r['forward_ms']:.2f} | "
-            f"{r['simulator_s']:.2f} | {r['speedup_one']:.0f}× | {r['speedup_ensemble']:.0f}× |"
-        )
-    lines += ["", f"Command: `{command_line()}`"]
-    return "\n".join(lines)
+    header = ["N", "files timed", "snapshots", "build ms", "forward ms (1 model)"]
+    header += ["simulator CPU s per decorrelated snapshot", "speed-up, 1 model", "speed-up, 5-model ensemble"]
+    out.table(header, body)
+    out.add("", f"Command: `{command_line()}`")
+    return out
 
 
 # ---- whole K-fold runs ------------------------------------------------------------------------------------
@@ -555,31 +566,43 @@ def folds(args) -> list[dict]:
     return rows
 
 
-def render_folds(rows, args) -> str:
-    lines = [
+def render_folds(rows, args) -> Section:
+    out = Section(
         f"All 5 folds (held-out whole trajectories, {args.epochs} epochs, cosine, batch 32 at N = 400, 8 at "
         f"N = 2000), φ = {args.phi}, "
         "the `train.py` path (baselines, bundles and report included), wall minutes on this 2-core machine.  "
         "Minutes per 380 graphs scales the measured time linearly with the number of graphs (the paper's "
         "set size).",
         "",
-        "| N | graphs | processes × threads | wall min | min per 380 graphs "
-        "| mean R² log η_r / log Π / Z_μ |",
-        "|---|---|---|---|---|---|",
-    ]
+    )
+    body = []
     for r in rows:
         layout = "1 × 2" if r["workers"] == 1 else f"{r['workers']} × 1"
         final = " / ".join(f"{r['scores'][k]:.3f}" for k in SCORES)
-        lines.append(
-            f"| {r['n']} | {r['graphs']} | {layout} | {r['minutes']:.1f} | "
-            f"{r['minutes'] * 380 / r['graphs']:.1f} | {final} |"
+        body.append(
+            [
+                f"{r['n']}",
+                f"{r['graphs']}",
+                layout,
+                f"{r['minutes']:.1f}",
+                f"{r['minutes'] * 380 / r['graphs']:.1f}",
+            ]
+            + [final]
         )
-    lines += ["", f"Command: `{command_line()}`"]
-    return "\n".join(lines)
+    header = ["N", "graphs", "processes × threads", "wall min", "min per 380 graphs"]
+    out.table(header + ["mean R² log η_r / log Π / Z_μ"], body)
+    out.add("", f"Command: `{command_line()}`")
+    return out
+
+
+# the command that made the rows (set by main: with --reuse, the one saved with them)
+COMMAND: list[str] = []
 
 
 def command_line() -> str:
-    return "python bench/train_speed.py " + " ".join(
+    if COMMAND:
+        return COMMAND[0]
+    return "python -m bench.train_speed " + " ".join(
         a for a in sys.argv[1:] if a not in ("--reuse", "--no-write")
     )
 
@@ -593,7 +616,7 @@ RUNNERS = {
 }
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("what", choices=sorted(RUNNERS))
     ap.add_argument("--files", default="data/paper/index.json")
@@ -625,13 +648,15 @@ def main() -> None:
     )
     ap.add_argument("--reuse", action="store_true", help="render the stored results again, no training")
     ap.add_argument("--no-write", action="store_true")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     RESULTS.mkdir(parents=True, exist_ok=True)
     run, render = RUNNERS[args.what]
     store = RESULTS / f"{args.what}.json"
     if args.reuse:
         saved = json.loads(store.read_text())
         rows, args = saved["rows"], argparse.Namespace(**{**vars(args), **saved["args"]})
+        # the command that made the rows (saved with them; before that, the one the published section quotes)
+        COMMAND[:] = [saved.get("command") or read_result_record(f"train_speed_{args.what}")["command"]]
     else:
         rows = run(args)
         if args.what == "pareto" and store.exists():  # rows accumulate: a re-run model replaces its row
@@ -644,14 +669,18 @@ def main() -> None:
                 {
                     "args": {k: v for k, v in vars(args).items() if k not in ("reuse", "no_write")},
                     "rows": rows,
+                    "command": command_line(),
                 },
                 indent=1,
             )
         )
-    text = render(rows, args)
-    print(text)
-    if not args.no_write:
-        replace_section(ROOT / "docs" / "benchmarks.md", f"train_speed_{args.what}", text)
+    publish(
+        f"train_speed_{args.what}",
+        render(rows, args),
+        not args.no_write,
+        page="validation/surrogate_cost.md",
+        command=command_line(),
+    )
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Surrogates trained on exactly bidisperse discs, on polydisperse suspensions whose radii are not known.
 
-    python bench/unknown_radii.py 'data/polydisperse/multirun/*/trajectory.h5' \
+    python -m bench.unknown_radii 'data/polydisperse/multirun/*/trajectory.h5' \
         --lookup 'data/paper/multirun/N400_phi0.76_*/trajectory.h5'
 
 Real particles spread in size by several per cent and a microscope does not measure each radius; the
@@ -30,9 +30,9 @@ import glob
 import sys
 
 import numpy as np
-from lfdem_snapshots import scores, state_means
-from publishing import command_line, publish
 
+from bench.lfdem_snapshots import scores, state_means
+from bench.publishing import command_line, publish, table
 from rheograph.errors import InputError
 
 NOMINAL = (1.0, 1.4)
@@ -86,18 +86,16 @@ def main(argv=None) -> int:
         runs = by_spread.setdefault(float(params["polydispersity"]), [])
         runs.append((read_snapshots(path), params["n_particles"] - n_large))
 
-    record: dict = {"command": command_line("unknown_radii.py", argv), "spreads": {}}
+    record: dict = {"command": command_line("unknown_radii", argv), "spreads": {}}
     lines = [
         "### Surrogates on polydisperse suspensions whose radii are unknown",
         "",
         f"N = 400, φ = 0.76; snapshots at strain ≥ {args.min_strain:g} of runs with each species' radii "
         "spread Gaussian (relative spread p, truncated at 2p); R² log η_r / log Π / Z_μ over all runs of "
         f"one spread; imaging models told ε = {args.declared_noise:g} a; in domain: the share of snapshots "
-        "the model does not flag.",
-        "",
-        "| p | radii given | model | R² log η_r | R² log Π | R² Z_μ | in domain |",
-        "|---|---|---|---|---|---|---|",
+        "the model does not flag.\n",
     ]
+    body = []
     for spread, runs in sorted(by_spread.items()):
         rows = {}
         truth, looked_up = [], []  # the simulator's values and the lookup's, snapshot by snapshot
@@ -123,15 +121,15 @@ def main(argv=None) -> int:
                 key = f"{how} / {name}"
                 if refused:
                     rows[key] = {"refused": refused}
-                    lines.append(f"| {spread:g} | {how} | `{name}` | refused: {refused} | | | |")
+                    body.append([f"{spread:g}", how, f"`{name}`", f"refused: {refused}", "", "", ""])
                     continue
                 pred, sim = np.concatenate(preds), np.concatenate(sims)
                 r2 = scores(pred, sim)
                 share = float(np.sum(shares) / len(sim))
                 rows[key] = {"r2": list(r2), "in_domain": share, "snapshots": len(sim)}
-                lines.append(
-                    f"| {spread:g} | {how} | `{name}` | {r2[0]:.3f} | {r2[1]:.4f} | {r2[2]:.4f} | "
-                    f"{share:.2f} |"
+                body.append(
+                    [f"{spread:g}", how, f"`{name}`", f"{r2[0]:.3f}", f"{r2[1]:.4f}", f"{r2[2]:.4f}"]
+                    + [f"{share:.2f}"]
                 )
         if lookup:
             for snaps, _ in runs:
@@ -144,13 +142,20 @@ def main(argv=None) -> int:
             if truth:
                 r2 = scores(np.concatenate(looked_up), np.concatenate(truth))
                 rows["lookup"] = {"r2": list(r2)}
-                lines.append(
-                    f"| {spread:g} | none | lookup: bidisperse mean at (φ, σ) | {r2[0]:.3f} | {r2[1]:.4f} | "
-                    f"{r2[2]:.4f} | — |"
+                body.append(
+                    [
+                        f"{spread:g}",
+                        "none",
+                        "lookup: bidisperse mean at (φ, σ)",
+                        f"{r2[0]:.3f}",
+                        f"{r2[1]:.4f}",
+                    ]
+                    + [f"{r2[2]:.4f}", "—"]
                 )
         record["spreads"][str(spread)] = rows
-    lines += ["", f"Command: `{record['command']}`"]
-    publish("unknown_radii", "\n".join(lines), not args.no_write, page="imaging.md", record=record)
+    header = ["p", "radii given", "model", "R² log η_r", "R² log Π", "R² Z_μ", "in domain"]
+    lines += [table(header, body), f"\nCommand: `{record['command']}`"]
+    publish("unknown_radii", lines, not args.no_write, page="imaging.md", record=record)
     return 0
 
 

@@ -2,8 +2,8 @@
 of the C++ reference code LF_DEM (public repository ryseto/LF_DEM), both run on one pinned core of this
 machine from the same initial configuration, at phi = 0.76, sigma/sigma0 = 10.
 
-    python bench/vs_lfdem.py --lfdem /work/lfdem/bin/LF_DEM                # N = 400, 2000; 3 repeats
-    LFDEM_BINARY=/work/lfdem/bin/LF_DEM python bench/vs_lfdem.py --n 400 --strains 0.02 0.04 \\
+    python -m bench.vs_lfdem --lfdem /work/lfdem/bin/LF_DEM                # N = 400, 2000; 3 repeats
+    LFDEM_BINARY=/work/lfdem/bin/LF_DEM python -m bench.vs_lfdem --n 400 --strains 0.02 0.04 \\
         --repeats 1 --no-write                                             # a quick check of the script
 
 LF_DEM is not part of this project: build it outside the repository (README.rst of LF_DEM; on Debian
@@ -33,8 +33,8 @@ against rheograph's (identical positions give the same rate to LF_DEM's 6 printe
 Schemes: rheograph ``euler-lagged`` (LF_DEM's discretisation: explicit Euler, dt from the previous step's
 speeds) at ``--disp`` and ``implicit`` at ``--implicit-disp``, against LF_DEM at each ``--lfdem-disp``
 (the same disp_max, and the smaller one it needs for the accuracy the implicit scheme has at 2e-3,
-docs/benchmarks.md section 2).  LF_DEM's files stay in a temporary directory.  Results replace the marked
-section of docs/benchmarks.md unless ``--no-write``.  Run it alone on the machine.
+docs/validation/time_step.md).  LF_DEM's files stay in a temporary directory.  Results replace the marked
+section of docs/validation/speed.md unless ``--no-write``.  Run it alone on the machine.
 """
 
 from __future__ import annotations
@@ -51,13 +51,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, replace_section
 
+from bench.publishing import Section, command_line, publish
+from bench.publishing import table as table_block
 from rheograph.io.hdf5 import POSITION_DECIMALS
 
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "vs_lfdem"
-INSERT_BEFORE = "## 4. Surrogate accuracy"  # where the section goes the first time it is written
 THREAD_ENV = {
     "OPENBLAS_NUM_THREADS": "1",
     "OMP_NUM_THREADS": "1",
@@ -354,13 +354,20 @@ def measure(args, binary: Path, work: Path) -> tuple[list[dict], list[str], str]
     return rows, checks, version
 
 
-def table(rows: list[dict], lfdem_disps: list[float]) -> list[str]:
-    ref_cols = [f"LF_DEM {d:g} / this (CPU per strain)" for d in lfdem_disps]
-    lines = [
-        "| N | code | scheme | disp_max | CPU s/strain | steps/strain | ms/step | µs/particle-step "
-        "| " + " | ".join(ref_cols) + " |",
-        "|---|---|---|---|---|---|---|---|" + "---|" * len(ref_cols),
+def table(rows: list[dict], lfdem_disps: list[float]) -> dict:
+    """A table block: each code's cost, and LF_DEM's over this one's at each LF_DEM disp_max."""
+    header = [
+        "N",
+        "code",
+        "scheme",
+        "disp_max",
+        "CPU s/strain",
+        "steps/strain",
+        "ms/step",
+        "µs/particle-step",
     ]
+    header += [f"LF_DEM {d:g} / this (CPU per strain)" for d in lfdem_disps]
+    body = []
     for r in rows:
         refs = {x["disp"]: x for x in rows if x["n"] == r["n"] and x["code"] == "LF_DEM"}
         ratios = [
@@ -369,13 +376,12 @@ def table(rows: list[dict], lfdem_disps: list[float]) -> list[str]:
             else "–"
             for d in lfdem_disps
         ]
-        lines.append(
-            f"| {r['n']} | {r['code']} | {r['scheme']} | {r['disp']:g} | {r['cpu_per_strain']:.1f} | "
-            f"{r['steps_per_strain']:.0f} | {r['ms_per_step']:.2f} | {r['us_per_particle_step']:.2f} | "
-            + " | ".join(ratios)
-            + " |"
+        body.append(
+            [f"{r['n']}", r["code"], r["scheme"], f"{r['disp']:g}", f"{r['cpu_per_strain']:.1f}"]
+            + [f"{r['steps_per_strain']:.0f}", f"{r['ms_per_step']:.2f}", f"{r['us_per_particle_step']:.2f}"]
+            + ratios
         )
-    return lines
+    return table_block(header, body)
 
 
 def find_binary(given: str | None) -> tuple[Path | None, str]:
@@ -441,7 +447,7 @@ def main(argv=None) -> int:
             shutil.rmtree(work, ignore_errors=True)
     command = command_line("vs_lfdem.py", argv)
     for n in args.n:  # one section per system size, so that sizes can be measured in separate runs
-        lines = [
+        out = Section(
             f"### Side by side with LF_DEM, N = {n}",
             "",
             f"Machine: {os.cpu_count()} cores; every run a child process pinned to core {args.core}, "
@@ -453,17 +459,21 @@ def main(argv=None) -> int:
             f"{version or '(version unknown)'}, explicit Euler, `-s <σ>cl`; rheograph `simulate.py`, "
             "solver auto.",
             "",
-            *table([r for r in rows if r["n"] == n], args.lfdem_disp),
+        )
+        out.table(**table([r for r in rows if r["n"] == n], args.lfdem_disp)["table"])
+        out.add(
             "",
             *[f"* {c}" for c in checks if c.startswith(f"N = {n}:")],
             "",
             f"Command (wall {time.time() - started:.0f} s): `{command}`",
-        ]
-        print("\n".join(lines), flush=True)
-        if not args.no_write:
-            replace_section(
-                ROOT / "docs" / "benchmarks.md", f"{SECTION}_n{n}", "\n".join(lines), INSERT_BEFORE
-            )
+        )
+        publish(
+            f"{SECTION}_n{n}",
+            out,
+            not args.no_write,
+            page="validation/speed.md",
+            command=command,
+        )
     return 0
 
 

@@ -1,11 +1,11 @@
 """Side by side with LF_DEM in 3D: the same start, the same parameters, the same scheme.
 
     # strain-0 check only (first shear rate, velocities, stress tensor against LF_DEM's first outputs)
-    python bench/vs_lfdem_3d.py --strain 0
+    python -m bench.vs_lfdem_3d --strain 0
     # and a run of ours to strain 2 at sigma/sigma0 = 10: CPU s per strain, eta_r, Pi/sigma, Z, Z_mu
-    python bench/vs_lfdem_3d.py --strain 2 --stress 10
+    python -m bench.vs_lfdem_3d --strain 2 --stress 10
     # the rate-controlled point (LF_DEM -r 0.1cl with the stiffness of sigma/sigma0 = 10)
-    python bench/vs_lfdem_3d.py --strain 2 --control rate --rate 0.1 --stress 10
+    python -m bench.vs_lfdem_3d --strain 2 --control rate --rate 0.1 --stress 10
 
 Reads LF_DEM's 3D start (data/lfdem_reference_3d/phi0.56_n500/D3N500VF0.56Bidi1.4_0.5Cubic_1_.dat, made
 by LF_DEM's own generator) and the LF_DEM outputs of the same state point (its README lists them), and runs

@@ -1,10 +1,10 @@
 """Surrogates across system sizes: shipped models trained at one N, scored zero-shot on the snapshots of
 larger (or smaller) systems, which they never saw by construction.
 
-    python bench/zero_shot_n.py data/large_n/multirun --models N400_phi0.76 N2000_phi0.76
-    python bench/zero_shot_n.py data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
+    python -m bench.zero_shot_n data/large_n/multirun --models N400_phi0.76 N2000_phi0.76
+    python -m bench.zero_shot_n data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
         --models N400_phi0.76_imaging --noise 0 0.01 0.03 --every 4 \\
-        --page benchmarks.md --section zero_shot_n_noise --title '...'
+        --page validation/position_noise.md --section zero_shot_n_noise --title '...'
 
 Every snapshot with strain >= 1 of every trajectory under the directories (grouped by N and φ), each
 model whose area fractions cover the group: its ensemble prediction (the models flag N as outside their
@@ -27,7 +27,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from publishing import command_line, publish
+
+from bench.publishing import command_line, publish, table
 
 
 def _noisy(snaps, keep, eps: float, rng):
@@ -201,7 +202,7 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, nargs="+", default=[0.0], help="position noise ε [a], declared")
     ap.add_argument("--every", type=int, default=1, help="score every n-th snapshot")
     ap.add_argument("--seed", type=int, default=0, help="of the noise draws")
-    ap.add_argument("--page", default="jamming.md", help="the docs page holding the section")
+    ap.add_argument("--page", default=None, help="the docs page holding the section (default: its record's)")
     ap.add_argument("--section", default="zero_shot_n")
     ap.add_argument("--title", default=None, help="a heading inside the section (none: the page has one)")
     ap.add_argument("--no-write", action="store_true")
@@ -222,26 +223,24 @@ def main(argv=None) -> int:
         "Gaussian noise per coordinate added to the positions and declared to the model (units of a).  "
         "The lookup is the mean of the other seeds' runs at the same (N, φ, σ): what a user who had "
         "simulated that state point would predict without reading a snapshot (absent where a state point "
-        "has one run; where it exists, every row of that (N, φ) is scored on the snapshots it covers).",
-        "",
-        "| N | φ | model | zero-shot | ε [a] | snapshots | stresses | R² log η_r | R² log Π | R² Z_μ | "
-        "fluct. η_r |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "has one run; where it exists, every row of that (N, φ) is scored on the snapshots it covers).\n",
     ]
+    header = ["N", "φ", "model", "zero-shot", "ε [a]", "snapshots", "stresses", "R² log η_r", "R² log Π"]
+    header += ["R² Z_μ", "fluct. η_r"]
+    body = []
     for r in rows:
         seen = "—" if r["zero_shot"] is None else "yes" if r["zero_shot"] else "no: its training N"
         eps = "any" if r["eps"] is None else f"{r['eps']:g}"
-        lines.append(
-            f"| {r['n']} | {r['phi']:g} | {r['model']} | {seen} | {eps} | "
-            f"{r['snapshots']} | {r['stresses']} | "
-            f"{r['r2_log_eta']:.4f} | {r['r2_log_pressure']:.5f} | {r['r2_z_mu']:.5f} | "
-            f"{r['fluct_eta']:.3f} |"
+        body.append(
+            [f"{r['n']}", f"{r['phi']:g}", r["model"], seen, eps, f"{r['snapshots']}", f"{r['stresses']}"]
+            + [f"{r['r2_log_eta']:.4f}", f"{r['r2_log_pressure']:.5f}", f"{r['r2_z_mu']:.5f}"]
+            + [f"{r['fluct_eta']:.3f}"]
         )
-    command = command_line("zero_shot_n.py", argv)
-    lines += ["", f"Command: `{command}`"]
+    command = command_line("zero_shot_n", argv)
+    lines += [table(header, body), f"\nCommand: `{command}`"]
     if args.title:
-        lines = [f"### {args.title}", "", *lines]
-    publish(args.section, "\n".join(lines), not args.no_write, page=args.page)
+        lines = [f"### {args.title}\n", *lines]
+    publish(args.section, lines, not args.no_write, page=args.page, command=command)
     if snapshots:
         print(
             "\n| N | φ | model | ε [a] | run | σ/σ0 | strain | η_r | η_r pred/true | Π pred/true "

@@ -39,18 +39,10 @@ def tiny_files(tmp_path_factory):
 
 
 def load_bench_script(name: str):
-    """A script of bench/ (not a package) imported as a module: ``load_bench_script("vs_lfdem")``."""
-    import importlib.util
-    import sys
+    """A module of the bench package: ``load_bench_script("vs_lfdem")`` is ``bench.vs_lfdem``."""
+    import importlib
 
-    bench = Path(__file__).resolve().parents[1] / "bench"
-    if str(bench) not in sys.path:  # as when run as a script: the bench scripts import each other
-        sys.path.insert(0, str(bench))
-    path = bench / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return importlib.import_module(f"bench.{name}")
 
 
 def tiny_training_overrides(tiny_files, tmp_path) -> list[str]:

@@ -11,7 +11,7 @@ from conftest import load_bench_script
 
 def test_the_noise_records_hold_the_published_tables_and_the_figure_draws_them(tmp_path):
     bench = load_bench_script("noise_figure")
-    page = (bench.ROOT / "docs" / "benchmarks.md").read_text()
+    page = (bench.ROOT / "docs" / "validation" / "position_noise.md").read_text()
     for _, exact, imaging, extra in bench.PANELS:
         runs = dict.fromkeys(run for run, _, _ in bench.curves(exact, imaging, extra))
         eps, rows = bench.run_records(bench.RECORDS, runs)

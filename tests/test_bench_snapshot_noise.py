@@ -37,16 +37,21 @@ def test_noise_bench_records_each_runs_table_for_the_figure(tiny_files, tmp_path
     bench/noise_figure.py draws): the record holds the printed table cell for cell, and the command."""
     run_dir = train_tiny_fold(tiny_files, tmp_path, "data.split=grouped")
     bench = load_bench_script("snapshot_noise")
-    monkeypatch.setattr(bench, "publish", lambda section, text, write: print(text))  # not the docs page
+    monkeypatch.setenv("RHEOGRAPH_BENCH_OUT", str(tmp_path / "sections"))  # not the docs page
     monkeypatch.setattr(bench, "RECORDS", tmp_path / "records")
     args = [str(run_dir), "--folds", "0", "--noise", "0", "0.01", "--cache-dir", str(tmp_path / "cache")]
     assert bench.main(args) == 0
     text = capsys.readouterr().out
     record = json.loads((tmp_path / "records" / f"{run_dir.name}.json").read_text())
-    assert record["noise"] == [0.0, 0.01] and "bench/snapshot_noise.py" in record["command"]
+    assert record["noise"] == [0.0, 0.01] and "python -m bench.snapshot_noise" in record["command"]
     table = [line for line in text.splitlines() if line.startswith("| graph network | R² log η_r |")]
     cells = [float(c) for c in table[0].strip("| ").split("|")[2:]]
     assert record["predictors"]["graph network"]["R² log η_r"] == cells
+    # the section's record holds the table as rows of cells, with the command
+    section = json.loads((tmp_path / "sections" / "snapshot_noise.json").read_text())
+    rows = next(b["table"]["rows"] for b in section["blocks"] if "table" in b)
+    assert [float(c) for c in rows[0][2:]] == record["predictors"][rows[0][0]][rows[0][1]]
+    assert section["command"] == record["command"].strip("`")
     figure = load_bench_script("noise_figure")
     eps, rows = figure.run_records(tmp_path / "records", [run_dir.name])
     assert eps == [0.0, 0.01] and rows[(run_dir.name, "graph network", "R² log η_r")] == cells

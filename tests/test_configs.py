@@ -1,5 +1,5 @@
 """Every simulation campaign sweeps only valid state points (the datasets' at the converged step of their
-area fraction, docs/benchmarks.md §2), every training experiment composes and runs, and neither group
+area fraction, docs/validation/time_step.md), every training experiment composes and runs, and neither group
 is accepted by the other entry point."""
 
 import dataclasses
@@ -174,7 +174,7 @@ def test_every_surrogate_study_variant_composes_valid_graph_settings():
 
     from rheograph.learn.train import graph_settings
 
-    study = load_bench_script("surrogate_study")
+    study = load_bench_script("training")
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         for name, overrides in study.VARIANTS.items():
             settings = graph_settings(compose(config_name="train", overrides=overrides))

@@ -27,7 +27,7 @@ def test_index_lists_exactly_the_committed_runs(index):
     assert listed == on_disk and not index["skipped"]
     for entry in index["runs"]:
         assert entry["params"]["n_particles"] in (400, 2000)
-        # the converged step per area fraction (docs/benchmarks.md §2): 1e-3 at phi = 0.80, 2e-3 below
+        # the converged step per area fraction (docs/validation/time_step.md): 1e-3 at phi = 0.80, 2e-3 below
         step = 1e-3 if np.isclose(entry["params"]["phi"], 0.80) else 2e-3
         assert entry["params"]["integrator"] == "implicit" and entry["params"]["disp_max"] == step
 

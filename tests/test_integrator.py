@@ -459,7 +459,7 @@ def test_lees_edwards_images_follow_the_affine_shear():
 
 def test_short_run_regression_values():
     """A fixed short run (N = 80, phi = 0.76, sigma/sigma0 = 10, steps 200-399 recorded) pinned to the
-    values of the code that matches LF_DEM (docs/benchmarks.md section 1).  CHOLMOD and qdldl, two
+    values of the code that matches LF_DEM (docs/validation/lfdem_2d.md).  CHOLMOD and qdldl, two
     different factorisations, agree on these means to 6e-13 after 400 steps, so rtol 1e-7 allows
     round-off between machines and BLAS builds but flags any change of the physics or the step rule
     (update the numbers only with a change that is meant to move them, and say why)."""

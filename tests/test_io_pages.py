@@ -4,7 +4,7 @@ refused in one line naming it."""
 import pytest
 
 from rheograph.errors import InputError
-from rheograph.io.pages import read_record, replace_section, write_record
+from rheograph.io.pages import read_record, render_blocks, replace_section, table_block, write_record
 
 
 def test_a_marked_section_is_replaced_in_place_and_the_rest_of_the_page_kept(tmp_path):
@@ -19,12 +19,24 @@ def test_a_marked_section_is_replaced_in_place_and_the_rest_of_the_page_kept(tmp
 
 def test_a_record_round_trips_and_a_damaged_one_is_one_line(tmp_path):
     path = tmp_path / "records" / "x.json"
-    write_record(path, {"command": "python bench/x.py", "values": [0.5, float("nan")]})
+    write_record(path, {"command": "python -m bench.x", "values": [0.5, float("nan")]})
     record = read_record(path, "result record of x")
-    assert record["command"] == "python bench/x.py" and record["values"][0] == 0.5
+    assert record["command"] == "python -m bench.x" and record["values"][0] == 0.5
     path.write_text("[1, 2]")
     with pytest.raises(InputError, match="x.json: not a result record of x"):
         read_record(path, "result record of x")
     path.write_text('{"cut')
     with pytest.raises(InputError, match="x.json: not a readable result record of x"):
         read_record(path, "result record of x")
+
+
+def test_blocks_render_prose_verbatim_and_tables_cell_for_cell():
+    blocks = [
+        {"text": "Title\n"},
+        table_block(["a", "b"], [[1, ""], ["x", 0.5]], align=["---", "--:"]),
+        {"text": "\nCommand: `python -m bench.x`"},
+    ]
+    assert (
+        render_blocks(blocks)
+        == "Title\n\n| a | b |\n|---|--:|\n| 1 | |\n| x | 0.5 |\n\nCommand: `python -m bench.x`"
+    )

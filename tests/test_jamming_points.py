@@ -189,6 +189,8 @@ def test_command_line_names_a_bad_index(tmp_path, capsys):
         main([str(bad)])
     with pytest.raises(InputError, match="--window"):
         main([str(bad), "--window", "0"])
+    with pytest.raises(InputError, match="--record: give the page too"):
+        main([str(bad), "--record", str(tmp_path / "jamming_fits.json")])
 
 
 def test_committed_n400_set_the_two_fit_methods_agree_once_branches_keep_their_amplitudes():

@@ -635,7 +635,7 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def test_default_jam_window_replayed_on_the_committed_runs_flags_only_the_jammed_ones():
-    """docs/benchmarks.md: the default window (10 rows), replayed on every committed trajectory, flags
+    """docs/validation/speed.md: the default window (10 rows), replayed on every committed trajectory, flags
     the phi = 0.80 runs that shear-jammed and none of the flowing ones (phi up to 0.80, sigma up to 200,
     eta_r up to ~800), whatever window each run was made with."""
     from rheograph.runs.runner import first_jammed_row

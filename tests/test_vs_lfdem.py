@@ -1,5 +1,5 @@
 """bench/vs_lfdem.py without LF_DEM: the no-binary path, the configuration and parameter files it writes for
-LF_DEM, and where its results go in docs/benchmarks.md."""
+LF_DEM, and where its results go in docs/validation/speed.md."""
 
 import os
 import re
@@ -15,7 +15,6 @@ from rheograph.sim.init_config import initial_configuration
 from rheograph.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = ROOT / "bench" / "vs_lfdem.py"
 REFERENCE_PARAMS = ROOT / "tests" / "data" / "lfdem_phi0.76" / "parameters_clm2d.txt"
 
 
@@ -27,7 +26,12 @@ def vs_lfdem():
 def run_script(*args):
     env = {k: v for k, v in os.environ.items() if k != "LFDEM_BINARY"}
     return subprocess.run(
-        [sys.executable, str(SCRIPT), *args], env=env, capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "bench.vs_lfdem", *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
 
 
@@ -96,19 +100,6 @@ def test_parameter_file_follows_the_reference(vs_lfdem):
     ours = entries(vs_lfdem.lfdem_parameters(SimParams(disp_max=2e-3), 5.0))
     reference = entries(REFERENCE_PARAMS.read_text())
     assert ours == reference
-
-
-def test_results_section_goes_before_the_surrogate_section_once(tmp_path, vs_lfdem):
-    doc = tmp_path / "benchmarks.md"
-    doc.write_text(
-        "## 3. Simulator speed\n\n<!-- simulate_speed:start -->\nT\n<!-- simulate_speed:end -->\n\nNotes.\n\n"
-        "## 4. Surrogate accuracy on trajectories it has never seen\n\nS\n"
-    )
-    vs_lfdem.replace_section(doc, "vs_lfdem", "first", vs_lfdem.INSERT_BEFORE)
-    vs_lfdem.replace_section(doc, "vs_lfdem", "second", vs_lfdem.INSERT_BEFORE)
-    text = doc.read_text()
-    assert text.count("<!-- vs_lfdem:start -->") == 1 and "first" not in text
-    assert text.index("Notes.") < text.index("second") < text.index("## 4. Surrogate accuracy")
 
 
 REPLAY = ROOT / "tests" / "data" / "lfdem_replay" / "replay_lfdem.py"

@@ -13,7 +13,7 @@ side would pass or fail by the draw.
 References (LF_DEM output, tests/data/lfdem_phi0.76 and data/lfdem_phi0.76_n400; their READMEs): σ/σ0 =
 10 at disp_max 5e-4 (strain 1.5) and 1e-3 (strain 3, and a second start to strain 2); σ/σ0 = 200 at 5e-4
 (four starts, strain 2–3) and 2.5e-4 (two starts, strain 2–3); at 1e-3 LF_DEM is ~20 % low there
-(docs/benchmarks.md §2).
+(docs/validation/time_step.md).
 """
 
 from pathlib import Path

@@ -29,7 +29,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.figures import save_png
-from rheograph.io.pages import replace_section
+from rheograph.io.pages import render_blocks, replace_section, table_block, write_record
 
 FRICTIONLESS_Z_MU = 0.02  # a sigma <= 0.5 run below this frictional coordination is on the mu = 0 branch
 BOOTSTRAP = 400
@@ -375,11 +375,20 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
     return rows
 
 
-def markdown(rows: list[dict], command: str) -> str:
-    lines = [
-        "| N | quantity | method | data | trajectories | φ range | φ_J (interval) | β | rms log η_r |",
-        "|---|---|---|---|---|---|---|---|---|",
+def section_blocks(rows: list[dict], command: str) -> list[dict]:
+    """The published section: the fits as a table (cells as printed) and the command."""
+    header = [
+        "N",
+        "quantity",
+        "method",
+        "data",
+        "trajectories",
+        "φ range",
+        "φ_J (interval)",
+        "β",
+        "rms log η_r",
     ]
+    body = []
     for r in rows:
         low, high = r["phi_j_ci"]
         beta = (
@@ -389,13 +398,20 @@ def markdown(rows: list[dict], command: str) -> str:
             + (f" ({r['beta_ci'][0]:.2f}–{r['beta_ci'][1]:.2f})" if r["beta_ci"] else "")
         )
         rms = "—" if not np.isfinite(r["rms_log"]) else f"{r['rms_log']:.3f}"
-        lines.append(
-            f"| {r['n']} | {r['quantity']} | {r['method']} | {r['data']} | {r['trajectories']} | "
-            f"{r['phi_range'][0]:g}–{r['phi_range'][1]:g} | {r['phi_j']:.4f} ({low:.4f}–{high:.4f}) | "
-            f"{beta} | {rms} |"
+        body.append(
+            [f"{r['n']}", r["quantity"], r["method"], r["data"], f"{r['trajectories']}"]
+            + [f"{r['phi_range'][0]:g}–{r['phi_range'][1]:g}", f"{r['phi_j']:.4f} ({low:.4f}–{high:.4f})"]
+            + [beta, rms]
         )
-    lines += ["", f"Command: `{command}`"]
-    return "\n".join(lines)
+    return [table_block(header, body), {"text": f"\nCommand: `{command}`"}]
+
+
+def docs_page(path: Path) -> str:
+    """``path`` as a page of the docs folder it is in (``docs/jamming.md`` -> ``jamming.md``)."""
+    parts = Path(path).resolve().parts
+    if "docs" not in parts:
+        return str(path)
+    return "/".join(parts[len(parts) - parts[::-1].index("docs") :])
 
 
 def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
@@ -484,12 +500,18 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--out", help="markdown file whose <!-- jamming_fits:start/end --> section gets the table"
     )
+    ap.add_argument(
+        "--record",
+        help="JSON record of the section (docs/results/bench/jamming_fits.json: what the docs build draws)",
+    )
     ap.add_argument("--figure", help="phase-diagram PNG")
     ap.add_argument("--seed", type=int, default=0, help="bootstrap seed")
     ap.add_argument(
         "--window", type=float, default=0.05, help="divergence fits: area fractions within this of the top"
     )
     args = ap.parse_args(argv)
+    if args.record and not args.out:
+        raise InputError("--record: give the page too (--out), whose section the record draws")
     if not 0.0 < args.window < 0.5:
         raise InputError(f"--window {args.window}: allowed 0 < window < 0.5")
     runs = read_runs(args.indexes)
@@ -499,10 +521,19 @@ def main(argv=None) -> None:
     command = "python -m rheograph.analysis.jamming_points " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
-    text = markdown(rows, command)
+    blocks = section_blocks(rows, command)
+    text = render_blocks(blocks)
     print(text)
     if args.out:
         replace_section(Path(args.out), "jamming_fits", text)
+    if args.record:
+        record = {
+            "section": "jamming_fits",
+            "page": docs_page(args.out),
+            "command": command,
+            "blocks": blocks,
+        }
+        write_record(Path(args.record), record)
     if args.figure:
         plot_phase_diagram(runs, rows, Path(args.figure))
 

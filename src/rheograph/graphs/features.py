@@ -31,7 +31,7 @@ Edge features, by name (``EDGE_FEATURES``):
   ``spring_shear`` = kt_ratio a_bar r sym(n (x) stretch)_xy / delta_sigma, the tangential spring's shear
   stresslet in units of sigma: the simulator's spring shear stress is (6 pi / area) sigma times the sum
   over pairs of (spring_shear - contact_shear).  They measure how much of the targets positions cannot
-  know (docs/benchmarks.md §4).
+  know (docs/validation/surrogate_accuracy.md).
 
 All features are O(1) numbers on purpose; the model standardises them with statistics of its training
 folds anyway.
@@ -281,7 +281,7 @@ def node_features(radii, size_ratio):
 # phi = 0.76, N = 400, after noise of 0.001 a and a 0.01 strain, the last step's eta_r scores R^2 log
 # eta_r 0.984 against the snapshot's recorded eta_r once one mean offset is removed (the one-solve of
 # the same relaxed positions: 0.968), and on exact positions the early one 0.999 with no offset
-# (docs/benchmarks.md, "What the relaxation measures").
+# (docs/validation/position_noise.md, "What the relaxation measures").
 COMPUTED_GRAPH_INPUTS = ("solve_viscosity", "frictional_coordination", "spring_pressure")
 RELAXED_GRAPH_INPUTS = (
     "relaxed_viscosity",
@@ -335,7 +335,7 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
     the previous one would step with (the first, the simulator's start value disp_max).  Measured at
     phi = 0.70, N = 400 (600 snapshots): its within-state fluctuation correlates with the recorded eta_r
     at 0.92 after one pass, 0.944 after two, 0.946 after three; with the recorded springs, 0.978 (a
-    one-off measurement; the reproducible effect is bench/history_information.py).
+    one-off measurement; the reproducible effect: docs/validation/surrogate_accuracy.md, the contact history).
     """
     sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
     snapshot = SimState(

@@ -1,8 +1,9 @@
 """Published results: marked sections of markdown pages and the JSON records beside them.
 
-A benchmark or a report command publishes a table by replacing the text between
-``<!-- name:start -->`` and ``<!-- name:end -->`` of a page, and its numbers as a JSON record, so
-that what draws a figure from them reads the record, never the page.
+A benchmark or a report command keeps a published section as a JSON record (its prose and its tables as
+rows of cells, :func:`render_blocks`) and draws it between ``<!-- name:start -->`` and
+``<!-- name:end -->`` of a page, so that what draws a figure or a page from them reads the record, never
+the page.
 """
 
 from __future__ import annotations
@@ -31,6 +32,37 @@ def replace_section(path: Path, name: str, body: str, insert_before: str | None 
     else:
         text = text.rstrip() + ("\n\n" if text else "") + block + "\n"
     _write_atomically(path, text)
+
+
+def table_block(header, rows, align=None) -> dict:
+    """A table of a section record: ``header`` (column names), ``rows`` (cells, formatted as they are to
+    be published) and ``align`` (each column's separator cell, ``---`` by default)."""
+    header = [str(h) for h in header]
+    return {
+        "table": {
+            "header": header,
+            "align": list(align) if align is not None else ["---"] * len(header),
+            "rows": [[str(c) for c in row] for row in rows],
+        }
+    }
+
+
+def render_blocks(blocks: list[dict]) -> str:
+    """The markdown of a section's blocks (``{"text": ...}`` verbatim, tables as pipe tables), joined by
+    newlines."""
+    return "\n".join(_render_block(b) for b in blocks)
+
+
+def _render_block(block: dict) -> str:
+    if "text" in block:
+        return block["text"]
+    t = block["table"]
+    lines = [_row(t["header"]), "|" + "|".join(t["align"]) + "|"]
+    return "\n".join(lines + [_row(row) for row in t["rows"]])
+
+
+def _row(cells) -> str:
+    return "|" + "|".join(f" {c} " if c else " " for c in cells) + "|"
 
 
 def write_record(path: Path, record: dict) -> None:

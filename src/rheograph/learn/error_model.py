@@ -1,11 +1,11 @@
 """Cross-validated error bars for the surrogate's predictions.
 
 The spread of the fold ensemble is not an error bar: the five models agree with each other more than with
-the simulator (docs/benchmarks.md §4: 20 % of held-out η_r within ±1 spread).  What the K-fold run does
-measure is the error on trajectories a model has never seen — every test snapshot is predicted by the
-one model that did not train on its trajectory.  The error model is the root-mean-square of those
-held-out residuals per state point (φ, σ), in the scale the targets fluctuate on: log10 for η_r and Π
-(multiplicative), linear for Z_μ.  A new snapshot gets the RMS of its state point, interpolated in
+the simulator (docs/validation/surrogate_accuracy.md: 20 % of held-out η_r within ±1 spread).  What the
+K-fold run does measure is the error on trajectories a model has never seen — every test snapshot is
+predicted by the one model that did not train on its trajectory.  The error model is the root-mean-square
+of those held-out residuals per state point (φ, σ), in the scale the targets fluctuate on: log10 for η_r
+and Π (multiplicative), linear for Z_μ.  A new snapshot gets the RMS of its state point, interpolated in
 log σ at the nearest trained φ (σ and φ are known inputs); beyond the trained σ range the end value holds
 (such inputs are flagged out of domain anyway).
 

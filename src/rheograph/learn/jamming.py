@@ -2,7 +2,7 @@
 
 Whether a run arrests is not written in one snapshot: at φ = 0.80, σ/σ0 = 50 the flowing snapshots and
 the arrested packing have the same Z_μ (2.5–2.9) and η_r ~ 10³–10⁴ with bursts
-(docs/benchmarks.md §2), and an arrest is a property of the trajectory as much as of the state point.
+(docs/validation/time_step.md), and an arrest is a property of the trajectory as much as of the state point.
 So the rule is a map of the training data: the share of training trajectories at the state point that
 ended jammed.  A prediction at (φ, σ) reports that share at the nearest trained state point (nearest φ,
 then nearest log σ); a state point is called jammed when at least half its training trajectories jammed.

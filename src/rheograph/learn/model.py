@@ -62,7 +62,8 @@ class ResGCN(nn.Module):
     virtual node (the graph's mean embedding through an MLP) or self-attention among all particles.  Why:
     the shear rate at imposed stress comes from a global solve of the lubrication network, which two
     rounds of local messages can only approximate.  Measured at N = 400: no gain on held-out trajectories
-    (the score is limited by the number of training trajectories; docs/benchmarks.md §4), so off by default.
+    (the score is limited by the number of training trajectories; docs/validation/surrogate_accuracy.md),
+    so off by default.
 
     Graph-level inputs u (G, global_in) — the imposed log stress, phi — are encoded and added to every node
     embedding before message passing, and concatenated to the pooled embedding before the head.

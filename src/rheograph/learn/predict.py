@@ -28,8 +28,9 @@ was trained on), ``notes`` (why not, and any accepted mismatch); per target ``*_
 ``*_pred_err`` (the cross-validated error bar of the model's ``error_model.json``: one RMS of held-out
 residuals at the snapshot's state point, log10 units for η_r and Π, absolute for Z_μ), ``*_pred_lower``
 and ``*_pred_upper`` (the bar in the target's own units: pred × 10^(∓err) for η_r and Π, pred ∓ err for
-Z_μ; on a seed no model had seen they held 78 % of η_r, 74 % of Π and 92 % of Z_μ, docs/benchmarks.md
-"How reliable are its error bars") and ``*_sim`` (the source's own value, NaN where it has none);
+Z_μ; on a seed no model had seen they held 78 % of η_r, 74 % of Π and 92 % of Z_μ,
+docs/validation/surrogate_accuracy.md "How reliable are its error bars") and ``*_sim`` (the source's own
+value, NaN where it has none);
 the physics-only values, nothing learned: ``eta_solve`` (η_r of one resistance solve at the imposed
 stress; NaN, with the reason in ``notes``, where that solve's shear rate vanishes or runs against the
 stress), ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and
@@ -65,7 +66,7 @@ from rheograph.resources import check_memory, prediction_bytes
 # Models trained on simulator output read overlaps of ~1e-3 a exactly (positions stored to 1e-7 a):
 # positions known only to a worse RMS precision [a] than this are outside their domain.  Set just above
 # the 2.2e-5 a RMS rounding of LF_DEM's 6-digit par files at N = 400, on which the exact model still
-# scores R2 log eta_r 0.989 (docs/benchmarks.md, "A shipped model on LF_DEM snapshots").
+# scores R2 log eta_r 0.989 (docs/validation/position_noise.md, "A shipped model on LF_DEM snapshots").
 EXACT_POSITION_PRECISION = 3e-5
 # the precision of particle tracking in a microscope [a]: which imaging models an exact model's flag names
 # when a snapshot's overlaps betray imprecise positions that it did not declare

@@ -269,7 +269,7 @@ def card_markdown(card: dict) -> str:
             [
                 "On noisy copies of the test trajectories (noise log-uniform over the trained range, "
                 "several copies per snapshot, every predictor on the same copies); by noise level: "
-                "`python bench/noise_bins.py` on the training run named below (these rows split by "
+                "`python -m bench.noise_bins` on the training run named below (these rows split by "
                 "their noise) and the project's results page.",
                 "",
             ]

@@ -427,7 +427,7 @@ class Simulation:
         if p.lagged_step_control:
             # LF_DEM (commit 00fa7cc) updates the contact sliding speeds only after the move, so its dt
             # is bounded by the previous step's speeds: ~1.3x fewer steps, and a larger Euler bias
-            # (docs/benchmarks.md, section 3).  Kept to reproduce LF_DEM's discretisation.
+            # (docs/validation/speed.md).  Kept to reproduce LF_DEM's discretisation.
             lagged = s.previous_interaction_speed
             s.previous_interaction_speed = interaction_speed
             if lagged >= 0.0:

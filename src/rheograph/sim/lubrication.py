@@ -132,7 +132,7 @@ def lubrication_resistance(radii, pair_i, pair_j, xi, active, delta):
 def pair_block(coeff, nx, ny, R):
     """Fill ``R`` (6, 6) with the dense symmetric resistance block in the order [Ux_i, Uy_i, w_i, Ux_j,
     Uy_j, w_j] and return it.  Callers pass one scratch block for all pairs: an allocation per pair
-    cost as much as the arithmetic (docs/benchmarks.md §3)."""
+    cost as much as the arithmetic (docs/validation/speed.md)."""
     tx = -ny
     ty = nx
     for a in range(2):

@@ -7,7 +7,7 @@ are given as the *upper* triangle in CSC form (what ``rheograph.sim.assembly`` w
 Backends (``SOLVERS``):
 
 * ``cholmod`` — supernodal Cholesky (SuiteSparse CHOLMOD through scikit-sparse) with nested-dissection
-  ordering.  Measured 1.5x faster than qdldl at N = 2000 (docs/benchmarks.md §3): the supernodes turn
+  ordering.  Measured 1.5x faster than qdldl at N = 2000 (docs/validation/speed.md): the supernodes turn
   the dense frontal updates into BLAS calls and nested dissection fills less than AMD on these 2D,
   mesh-like matrices.  Needs Debian's ``libsuitesparse-dev`` (installed by ``make install``) and the
   ``cholmod`` extra.
@@ -79,7 +79,7 @@ class CholmodSolver(SparseSPDSolver):
     """
 
     name = "cholmod"
-    ordering = "nesdis"  # measured: 20 % less fill and time than AMD at N = 2000 (docs/benchmarks.md)
+    ordering = "nesdis"  # measured: 20 % less fill and time than AMD at N = 2000 (docs/validation/speed.md)
 
     def __init__(self) -> None:
         from sksparse import cholmod
