@@ -1,22 +1,16 @@
-"""The 3D simulator against LF_DEM's own output (bench/vs_lfdem_3d.py on the committed LF_DEM 3D reference,
-N 500, phi 0.56, one start): at strain 0, under stress control (sigma/sigma0 10) and rate control (0.1), the
-first shear rate, every particle's velocity and angular velocity and the whole stress tensor agree to the 6
-digits LF_DEM prints; in steady state (slow), the means agree statistically."""
+"""The 3D simulator against LF_DEM's own output (`python -m bench.vs_lfdem_3d` on the committed LF_DEM 3D
+reference, N 500, phi 0.56, one start): at strain 0, under stress control (sigma/sigma0 10) and rate control
+(0.1), the first shear rate, every particle's velocity and angular velocity and the whole stress tensor
+agree to the 6 digits LF_DEM prints; in steady state (slow), the means agree statistically."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import load_bench_script
 
 
 def load_bench():
-    spec = importlib.util.spec_from_file_location("vs_lfdem_3d", ROOT / "bench" / "vs_lfdem_3d.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_bench_script("vs_lfdem_3d")
 
 
 def test_first_step_matches_lfdem_3d_to_its_printed_digits(tmp_path):
