@@ -322,7 +322,7 @@ class SimulationBase(ABC):
     # a dimension's class attributes: DIM (space dimension), DOF (degrees of freedom per particle, the
     # DIM translations first), SOLVENT_UNIT (2 eta0 E at unit rate [sigma0], in the stress's order) and
     # its kernels neighbour_pairs(positions, radii, *edges, le_offset, gap, skin),
-    # stress_unit_factor(*edges), max_interaction_speed(vel, radii, i, j, nvec, dy, active, state, rate)
+    # max_interaction_speed(vel, radii, i, j, nvec, dy, active, state, rate)
     DIM: int
     DOF: int
     SOLVENT_UNIT: np.ndarray
@@ -335,7 +335,7 @@ class SimulationBase(ABC):
             state = self.new_state(params)
         self.state = state
         self.solver = make_solver(solver)
-        self.stress_factor = self.stress_unit_factor(*self.edges())
+        self.stress_factor = stress_unit_factor(*self.edges())
         self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
         self.drag = self.one_body_drag(state.radii)
         self.velocity = np.zeros(self.DOF * state.radii.shape[0])
@@ -522,7 +522,6 @@ class Simulation(SimulationBase):
     DOF = 3  # U_x, U_y, w_z
     SOLVENT_UNIT = np.array([0.0, 1.0, 0.0])  # (xx, xy, yy)
     neighbour_pairs = staticmethod(neighbour_pairs)
-    stress_unit_factor = staticmethod(stress_unit_factor)
     max_interaction_speed = staticmethod(contacts.max_interaction_speed)
 
     def edges(self) -> tuple[float, float]:

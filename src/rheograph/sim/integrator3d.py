@@ -23,7 +23,7 @@ from rheograph.sim.init_config3d import initial_configuration
 from rheograph.sim.integrator import LinearProblem, SimState, SimulationBase, StepResult, classify_pairs, move
 from rheograph.sim.lubrication import lubrication_resistance
 from rheograph.sim.params3d import SimParams3D
-from rheograph.sim.stress3d import pair_stress_sums, spring_stress, stress_unit_factor
+from rheograph.sim.stress3d import pair_stress_sums, spring_stress
 
 
 @dataclass
@@ -142,7 +142,6 @@ class Simulation3D(SimulationBase):
     DOF = 6  # U (3), w (3)
     SOLVENT_UNIT = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0])  # (xx, xy, xz, yy, yz, zz)
     neighbour_pairs = staticmethod(neighbour_pairs)
-    stress_unit_factor = staticmethod(stress_unit_factor)
     max_interaction_speed = staticmethod(contacts3d.max_interaction_speed)
     one_body_drag = staticmethod(lubrication3d.one_body_drag)
 
