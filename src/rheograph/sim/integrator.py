@@ -15,6 +15,8 @@ Integrators:
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import time as wallclock
 from abc import ABC, abstractmethod
@@ -380,6 +382,24 @@ class SimulationBase(ABC):
     def advance(self, vel, lp: LinearProblem, shear_rate: float, dt: float) -> None:
         """Move the state by dt (stretches, positions, Lees-Edwards offset, wrapping); sets
         ``max_displacement``."""
+
+    def solve_configuration(self, passes: int = 2) -> StepResult:
+        """The result of one step from the configuration this simulation was started from, which must be
+        fresh (no step taken): the resistance solve of a snapshot, whose tangential springs start
+        unstretched.  dt is set as a running simulation sets it: each of ``passes`` solves starts again
+        from the same configuration and assumes DT_GROWTH x the dt the previous one would step with (the
+        first, ``disp_max``).  The state is left as after the last pass's step; the neighbour list, the
+        sparsity pattern and the symbolic factorisation are made once (a third of a pass's cost)."""
+        if self.state.steps:
+            raise ValueError("solve_configuration needs a fresh simulation (no step taken)")
+        start = copy.deepcopy(self.state)
+        for k in range(passes):
+            if k:
+                # step() has left dt_assumed at DT_GROWTH x its dt (at most dt_max): the next pass assumes it
+                self.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=self.state.dt_assumed)
+                self.max_displacement = 0.0
+            result = self.step()
+        return result
 
     # ---- neighbour list and sparsity pattern --------------------------------------------------
     def _rebuild_neighbours(self) -> None:

@@ -8,8 +8,6 @@ centres at one z, box taller than the cut-off in z) takes the 2D simulator's ste
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +18,7 @@ from rheograph.sim.assembly3d import UNIT_STRAIN_RATE, assemble_resistance
 from rheograph.sim.geometry import wrap_offset
 from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry, wrap_positions
 from rheograph.sim.init_config3d import initial_configuration
-from rheograph.sim.integrator import LinearProblem, SimState, SimulationBase, StepResult, classify_pairs, move
+from rheograph.sim.integrator import LinearProblem, SimState, SimulationBase, classify_pairs, move
 from rheograph.sim.lubrication import lubrication_resistance
 from rheograph.sim.params3d import SimParams3D
 from rheograph.sim.stress3d import pair_stress_sums, spring_stress
@@ -177,20 +175,3 @@ class Simulation3D(SimulationBase):
             s.positions, s.displacement, vel, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, s.contact_state,
             s.stretch, shear_rate, dt, s.lx, s.ly, s.lz, s.le_offset,
         )  # fmt: skip
-
-    def solve_configuration(self, passes: int = 2) -> StepResult:
-        """The result of one stress-controlled step from the configuration this simulation was started
-        from, which must be fresh (no step taken): the resistance solve of a snapshot, whose tangential
-        springs start unstretched.  dt is set as a running simulation sets it: each of ``passes`` solves
-        starts again from the same configuration and assumes DT_GROWTH x the dt the previous one would
-        step with (the first, ``disp_max``), as the 2D one-solve does.  The state is left as after the
-        last pass's step; the neighbour list and the symbolic factorisation are made once."""
-        if self.state.steps:
-            raise ValueError("solve_configuration needs a fresh simulation (no step taken)")
-        start = copy.deepcopy(self.state)
-        for k in range(passes):
-            if k:
-                self.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=self.state.dt_assumed)
-                self.max_displacement = 0.0
-            result = self.step()
-        return result
