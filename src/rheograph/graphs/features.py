@@ -91,7 +91,12 @@ def check_separations(where: str, positions, radii, lx, ly, le_offset) -> None:
     dy = dy - across * ly
     dx = dx - across * le_offset
     dx = dx - lx * np.floor(dx / lx + 0.5)
-    distance = np.hypot(dx, dy)
+    refuse_centres_inside(where, radii, pair_i, pair_j, np.hypot(dx, dy))
+
+
+def refuse_centres_inside(where: str, radii, pair_i, pair_j, distance) -> None:
+    """Raises InputError naming the worst listed pair (``pair_i``, ``pair_j``) (P,) whose centre
+    ``distance`` (P,) [a] is at most the larger radius (``check_separations``, either dimension)."""
     larger = np.maximum(radii[pair_i], radii[pair_j])
     inside = np.flatnonzero(distance <= larger)
     if inside.size:

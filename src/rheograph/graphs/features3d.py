@@ -37,6 +37,7 @@ from rheograph.graphs.features import (
     Relaxation,
     contact_history,
     pair_records,
+    refuse_centres_inside,
     relax_simulation,
 )
 from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry
@@ -56,17 +57,7 @@ def check_separations3d(where: str, positions, radii, box3) -> None:
     radii = np.asarray(radii, dtype=np.float64)
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, 0.0)
     _, distance, _, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
-    larger = np.maximum(radii[pair_i], radii[pair_j])
-    inside = np.flatnonzero(distance <= larger)
-    if inside.size:
-        k = inside[np.argmin(distance[inside] / larger[inside])]
-        i, j = int(pair_i[k]), int(pair_j[k])
-        raise InputError(
-            f"{where}: particles {i} and {j} (radii {radii[i]:g}, {radii[j]:g}) are {distance[k]:.3g} a "
-            f"apart, one centre within the other particle ({inside.size} such pair(s)): no contact model "
-            "describes that (the simulator's overlaps stay within 0.02 a); is a particle listed twice, or "
-            "are the positions in other units than the small radius a?"
-        )
+    refuse_centres_inside(where, radii, pair_i, pair_j, distance)
 
 
 def snapshot_pairs3d(positions, radii, box3, cutoff, params) -> dict:
