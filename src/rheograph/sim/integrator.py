@@ -313,8 +313,7 @@ class SimulationBase(ABC):
     """The LF-DEM driver of any dimension: neighbour-list upkeep, the step (solve, shear rate from the
     stress target or the imposed rate, adaptive dt, move) and its timings.  ``Simulation`` (2D) and
     ``integrator3d.Simulation3D`` supply the dimension's kernels through the class attributes and the
-    methods ``edges``, ``new_state``, ``one_body_drag``, ``linear_problem``, ``stress_sums`` and
-    ``advance``.
+    methods ``edges``, ``new_state``, ``one_body_drag``, ``linear_problem`` and ``stress_sums``.
 
     ``velocity`` holds the last step's non-affine velocities (N DOF,); ``stress_factor`` converts
     stresslet sums to sigma0 (6 pi / box area or volume); ``drag`` is the one-body Stokes drag per degree
@@ -324,7 +323,8 @@ class SimulationBase(ABC):
     # a dimension's class attributes: DIM (space dimension), DOF (degrees of freedom per particle, the
     # DIM translations first), SOLVENT_UNIT (2 eta0 E at unit rate [sigma0], in the stress's order) and
     # its kernels neighbour_pairs(positions, radii, *edges, le_offset, gap, skin),
-    # max_interaction_speed(vel, radii, i, j, nvec, dy, active, state, rate)
+    # max_interaction_speed(vel, radii, i, j, nvec, dy, active, state, rate) and advance_kernel(positions,
+    # displacement, vel, radii, i, j, nvec, dy, state, stretch, rate, dt, *edges, le_offset)
     DIM: int
     DOF: int
     SOLVENT_UNIT: np.ndarray
@@ -378,10 +378,14 @@ class SimulationBase(ABC):
         the unit-rate ones ``vel_rate``, and the spring virial: (lub0, dash0, lub1, dash1, spring), in the
         stress's component order [F_CL a]; ``record``: all components, else at least xy."""
 
-    @abstractmethod
     def advance(self, vel, lp: LinearProblem, shear_rate: float, dt: float) -> None:
-        """Move the state by dt (stretches, positions, Lees-Edwards offset, wrapping); sets
-        ``max_displacement``."""
+        """Move the state by dt with the velocities ``vel`` (stretches, positions, Lees-Edwards offset,
+        wrapping: the dimension's ``advance_kernel``); sets ``max_displacement``."""
+        s = self.state
+        self.max_displacement, s.le_offset = self.advance_kernel(
+            s.positions, s.displacement, vel, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, s.contact_state,
+            s.stretch, shear_rate, dt, *self.edges(), s.le_offset,
+        )  # fmt: skip
 
     def solve_configuration(self, passes: int = 2) -> StepResult:
         """The result of one step from the configuration this simulation was started from, which must be
@@ -543,6 +547,7 @@ class Simulation(SimulationBase):
     SOLVENT_UNIT = np.array([0.0, 1.0, 0.0])  # (xx, xy, yy)
     neighbour_pairs = staticmethod(neighbour_pairs)
     max_interaction_speed = staticmethod(contacts.max_interaction_speed)
+    advance_kernel = staticmethod(_advance)
 
     def edges(self) -> tuple[float, float]:
         return self.state.lx, self.state.ly
@@ -574,13 +579,6 @@ class Simulation(SimulationBase):
         )  # fmt: skip
         spring = spring_stress(s.pair_i, lp.nvec, lp.r, lp.f_on_i, s.contact_state, record)
         return lub0, dash0, lub1, dash1, spring
-
-    def advance(self, vel, lp: LinearProblem, shear_rate: float, dt: float) -> None:
-        s = self.state
-        self.max_displacement, s.le_offset = _advance(
-            s.positions, s.displacement, vel, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, s.contact_state,
-            s.stretch, shear_rate, dt, s.lx, s.ly, s.le_offset,
-        )  # fmt: skip
 
 
 def viscosity(result: StepResult) -> float:

@@ -142,6 +142,7 @@ class Simulation3D(SimulationBase):
     neighbour_pairs = staticmethod(neighbour_pairs)
     max_interaction_speed = staticmethod(contacts3d.max_interaction_speed)
     one_body_drag = staticmethod(lubrication3d.one_body_drag)
+    advance_kernel = staticmethod(_advance)
 
     def edges(self) -> tuple[float, float, float]:
         return self.state.lx, self.state.ly, self.state.lz
@@ -168,10 +169,3 @@ class Simulation3D(SimulationBase):
         )  # fmt: skip
         spring = spring_stress(s.pair_i, lp.nvec, lp.r, lp.f_on_i, s.contact_state)
         return lub0, dash0, lub1, dash1, spring
-
-    def advance(self, vel, lp: LinearProblem, shear_rate: float, dt: float) -> None:
-        s = self.state
-        self.max_displacement, s.le_offset = _advance(
-            s.positions, s.displacement, vel, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, s.contact_state,
-            s.stretch, shear_rate, dt, s.lx, s.ly, s.lz, s.le_offset,
-        )  # fmt: skip
