@@ -53,40 +53,11 @@ def build_pattern(pair_i, pair_j, n_particles, block=3):
 
 
 @njit(cache=True)
-def _add_diag_block(data, indptr, slot, j, R, off, block):
-    for q in range(block):
-        base = indptr[block * j + q] + slot
+def _add_diag_block(data, indptr, slot, j, R, off):
+    for q in range(3):
+        base = indptr[3 * j + q] + slot
         for r in range(q + 1):
             data[base + r] += R[off + r, off + q]
-
-
-@njit(cache=True)
-def add_pair_blocks(data, indptr, diag_slot, slot, i, j, R):
-    """Add a pair's resistance ``R`` (2b, 2b) [6 pi eta0 times a, a^2 or a^3] (rows and columns: i's b
-    degrees of freedom, then j's; b = 3 in 2D, 6 in 3D) to the matrix data on the
-    ``build_pattern(..., block=b)`` pattern: the upper parts of both diagonal blocks and the (i, j) block
-    at the pair's ``slot``."""
-    block = R.shape[0] // 2
-    _add_diag_block(data, indptr, diag_slot[i], i, R, 0, block)
-    _add_diag_block(data, indptr, diag_slot[j], j, R, block, block)
-    for q in range(block):
-        base = indptr[block * j + q] + slot
-        for r in range(block):
-            data[base + r] += R[r, block + q]
-
-
-@njit(cache=True)
-def add_affine_contact_force(rhs_rate, R, dy, i, j):
-    """Add -R . (affine relative motion at unit shear rate) of a contact pair to the right-hand side
-    ``rhs_rate`` (N b,): j translates by ``dy`` e_x [a] relative to i and both rotate at -1/2 about z
-    (each particle's last degree of freedom).  ``R`` (2b, 2b) as in ``add_pair_blocks``."""
-    block = R.shape[0] // 2
-    for r in range(2 * block):
-        f = -(R[r, block] * dy + R[r, block - 1] * -0.5 + R[r, 2 * block - 1] * -0.5)
-        if r < block:
-            rhs_rate[block * i + r] += f
-        else:
-            rhs_rate[block * j + r - block] += f
 
 
 @njit(cache=True)
@@ -139,9 +110,20 @@ def assemble_resistance(
             contact_block(coeff[p], nx, ny, radii[i], radii[j], k_normal[p], k_tangential[p], R)
         else:
             pair_block(coeff[p], nx, ny, R)
-        add_pair_blocks(data, indptr, diag_slot, pair_slot[p], i, j, R)
+        _add_diag_block(data, indptr, diag_slot[i], i, R, 0)
+        _add_diag_block(data, indptr, diag_slot[j], j, R, 3)
+        for q in range(3):
+            base = indptr[3 * j + q] + pair_slot[p]
+            for r in range(3):
+                data[base + r] += R[r, 3 + q]
         if in_contact[p]:
-            add_affine_contact_force(rhs_rate, R, dy[p], i, j)
+            # affine motion at unit rate: j moves by dy e_x relative to i, both rotate at -1/2
+            for r in range(6):
+                f = -(R[r, 3] * dy[p] + R[r, 2] * -0.5 + R[r, 5] * -0.5)
+                if r < 3:
+                    rhs_rate[3 * i + r] += f
+                else:
+                    rhs_rate[3 * j + r - 3] += f
         else:
             strain_force(coeff[p], nx, ny, 0.0, 0.5, 0.0, g)
             for r in range(3):

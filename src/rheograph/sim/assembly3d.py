@@ -9,11 +9,18 @@ zeros for pairs that do not interact this step, so the symbolic factorisation li
 import numpy as np
 from numba import njit
 
-from rheograph.sim.assembly import add_affine_contact_force, add_pair_blocks
 from rheograph.sim.lubrication3d import contact_block, one_body_resistance, pair_block, strain_force
 
 # the imposed rate of strain at unit shear rate (u = y e_x): E_xy = E_yx = 1/2
 UNIT_STRAIN_RATE = np.array([[0.0, 0.5, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])
+
+
+@njit(cache=True)
+def _add_diag_block(data, indptr, slot, j, R, off):
+    for q in range(6):
+        base = indptr[6 * j + q] + slot
+        for r in range(q + 1):
+            data[base + r] += R[off + r, off + q]
 
 
 @njit(cache=True)
@@ -63,9 +70,19 @@ def assemble_resistance(
             contact_block(coeff[p], n_p, radii[i], radii[j], k_normal[p], k_tangential[p], R)
         else:
             pair_block(coeff[p], n_p, R)
-        add_pair_blocks(data, indptr, diag_slot, pair_slot[p], i, j, R)
+        _add_diag_block(data, indptr, diag_slot[i], i, R, 0)
+        _add_diag_block(data, indptr, diag_slot[j], j, R, 6)
+        for q in range(6):
+            base = indptr[6 * j + q] + pair_slot[p]
+            for r in range(6):
+                data[base + r] += R[r, 6 + q]
         if in_contact[p]:
-            add_affine_contact_force(rhs_rate, R, dy[p], i, j)
+            for r in range(12):
+                f = -(R[r, 6] * dy[p] + R[r, 5] * -0.5 + R[r, 11] * -0.5)
+                if r < 6:
+                    rhs_rate[6 * i + r] += f
+                else:
+                    rhs_rate[6 * j + r - 6] += f
         else:
             strain_force(coeff[p], n_p, e_unit, g)
             for r in range(6):
