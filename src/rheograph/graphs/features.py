@@ -39,8 +39,6 @@ folds anyway.
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 import math
 from typing import NamedTuple
 
@@ -49,7 +47,7 @@ import numpy as np
 from rheograph.errors import InputError
 from rheograph.sim.contacts import SLIDE
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
-from rheograph.sim.integrator import SimState, Simulation, particle_pressure
+from rheograph.sim.integrator import SimState, Simulation, SimulationBase, particle_pressure
 from rheograph.sim.params import SimParams
 
 PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
@@ -93,7 +91,12 @@ def check_separations(where: str, positions, radii, lx, ly, le_offset) -> None:
     dy = dy - across * ly
     dx = dx - across * le_offset
     dx = dx - lx * np.floor(dx / lx + 0.5)
-    distance = np.hypot(dx, dy)
+    refuse_centres_inside(where, radii, pair_i, pair_j, np.hypot(dx, dy))
+
+
+def refuse_centres_inside(where: str, radii, pair_i, pair_j, distance) -> None:
+    """Raises InputError naming the worst listed pair (``pair_i``, ``pair_j``) (P,) whose centre
+    ``distance`` (P,) [a] is at most the larger radius (``check_separations``, either dimension)."""
     larger = np.maximum(radii[pair_i], radii[pair_j])
     inside = np.flatnonzero(distance <= larger)
     if inside.size:
@@ -138,19 +141,20 @@ def pair_records(radii, pair_i, pair_j, nvec, r, xi, cutoff, params) -> dict:
     }
 
 
-def contact_history(pairs: dict, contacts, n_particles: int, kn_coefficient: float) -> dict:
-    """Per pair of ``pairs`` (``snapshot_pairs``): the tangential spring ``stretch`` (P, 2) [delta_sigma]
-    and ``sliding`` (P,) bool, from the recorded ``contacts`` = (pairs (C, 2), states (C,), stretches
-    (C, 2) [a]) of one snapshot; zero for pairs not recorded as touching.  A recorded pair (j, i) with
-    i < j carries the stretch of i relative to j, hence the sign flip."""
+def contact_history(pairs: dict, contacts, n_particles: int, kn_coefficient: float, dim: int = 2) -> dict:
+    """Per pair of ``pairs`` (``snapshot_pairs``): the tangential spring ``stretch`` (P, dim)
+    [delta_sigma] and ``sliding`` (P,) bool, from the recorded ``contacts`` = (pairs (C, 2), states (C,),
+    stretches (C, dim) [a]) of one snapshot of dimension ``dim``; zero for pairs not recorded as touching.
+    A recorded pair (j, i) with i < j carries the stretch of i relative to j, hence the sign flip."""
     recorded, states, stretches = contacts
     recorded = np.asarray(recorded, dtype=np.int64).reshape(-1, 2)
+    stretches = np.asarray(stretches, dtype=np.float64).reshape(-1, dim)
     flip = recorded[:, 0] > recorded[:, 1]
     key = np.minimum(recorded[:, 0], recorded[:, 1]) * n_particles + np.maximum(
         recorded[:, 0], recorded[:, 1]
     )
     lookup = {int(k): c for c, k in enumerate(key)}
-    stretch = np.zeros((pairs["i"].size, 2))
+    stretch = np.zeros((pairs["i"].size, dim))
     sliding = np.zeros(pairs["i"].size, dtype=bool)
     unit = overlap_unit(kn_coefficient)
     for p, (i, j) in enumerate(zip(pairs["i"], pairs["j"])):
@@ -158,7 +162,7 @@ def contact_history(pairs: dict, contacts, n_particles: int, kn_coefficient: flo
         if c is None:
             continue
         sign = -1.0 if flip[c] != (i > j) else 1.0
-        stretch[p] = sign * np.asarray(stretches[c], dtype=np.float64) / unit
+        stretch[p] = sign * stretches[c] / unit
         sliding[p] = states[c] == SLIDE
     return {"stretch": stretch, "sliding": sliding}
 
@@ -345,16 +349,7 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
         ly=ly,
         le_offset=le_offset,
     )
-    # neighbour list, sparsity pattern and symbolic factorisation once (a third of a pass's cost): every
-    # pass starts from the snapshot as built, only the dt its step assumes changes
-    sim = Simulation(sim_params, snapshot)
-    start = copy.deepcopy(snapshot)
-    for k in range(passes):
-        if k:
-            # step() has left dt_assumed at DT_GROWTH x its dt (at most dt_max): the next pass assumes it
-            sim.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=sim.state.dt_assumed)
-            sim.max_displacement = 0.0
-        result = sim.step()
+    result = Simulation(sim_params, snapshot).solve_configuration(passes)
     if result.shear_rate == 0.0:
         raise InputError("solve_viscosity: the snapshot's resistance solve gives a zero shear rate")
     return sim_params.stress / result.shear_rate
@@ -416,22 +411,29 @@ def relax_positions(
             le_offset=le_offset,
         ),
     )
+    return relax_simulation(sim, strain, max_steps, particle_pressure)
+
+
+def relax_simulation(sim: SimulationBase, strain: float, max_steps: int | None, pressure) -> Relaxation:
+    """``relax_positions`` of a fresh stress-controlled simulation ``sim`` of either dimension:
+    ``pressure`` maps its recorded ``StepResult`` to Pi [sigma0]."""
+    stress = sim.params.stress
     viscosity_early = math.nan
     for _ in range(RELAX_MAX_STEPS if max_steps is None else max_steps):
         if sim.state.strain >= strain:
             break
         result = sim.step()
         if math.isnan(viscosity_early) and sim.state.strain >= 0.25 * strain:
-            viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
+            viscosity_early = _viscosity(stress, result.shear_rate)
     relaxed = sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)
     # the observables of the relaxed configuration: one more solve, whose move is discarded
     result = sim.step(record=True)
     if math.isnan(viscosity_early):  # a creeping packing short of a quarter of the strain
-        viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
+        viscosity_early = _viscosity(stress, result.shear_rate)
     return Relaxation(
         *relaxed,
-        viscosity=_viscosity(sim_params.stress, result.shear_rate),
-        pressure=particle_pressure(result),
+        viscosity=_viscosity(stress, result.shear_rate),
+        pressure=pressure(result),
         z_mu=2.0 * result.n_frictional / sim.state.radii.size,
         viscosity_early=viscosity_early,
     )

@@ -30,13 +30,16 @@ the volume for the area (``snapshot_descriptors``).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from rheograph.errors import InputError
-from rheograph.graphs.features import RELAX_MAX_STEPS, Relaxation, _viscosity, overlap_unit, pair_records
-from rheograph.sim.contacts import SLIDE
+from rheograph.graphs.features import (
+    Relaxation,
+    contact_history,
+    pair_records,
+    refuse_centres_inside,
+    relax_simulation,
+)
 from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry
 from rheograph.sim.integrator3d import SimState3D, Simulation3D
 from rheograph.sim.params3d import SimParams3D
@@ -54,17 +57,7 @@ def check_separations3d(where: str, positions, radii, box3) -> None:
     radii = np.asarray(radii, dtype=np.float64)
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, 0.0)
     _, distance, _, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
-    larger = np.maximum(radii[pair_i], radii[pair_j])
-    inside = np.flatnonzero(distance <= larger)
-    if inside.size:
-        k = inside[np.argmin(distance[inside] / larger[inside])]
-        i, j = int(pair_i[k]), int(pair_j[k])
-        raise InputError(
-            f"{where}: particles {i} and {j} (radii {radii[i]:g}, {radii[j]:g}) are {distance[k]:.3g} a "
-            f"apart, one centre within the other particle ({inside.size} such pair(s)): no contact model "
-            "describes that (the simulator's overlaps stay within 0.02 a); is a particle listed twice, or "
-            "are the positions in other units than the small radius a?"
-        )
+    refuse_centres_inside(where, radii, pair_i, pair_j, distance)
 
 
 def snapshot_pairs3d(positions, radii, box3, cutoff, params) -> dict:
@@ -77,30 +70,6 @@ def snapshot_pairs3d(positions, radii, box3, cutoff, params) -> dict:
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, cutoff)
     nvec, r, xi, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
     return pair_records(radii, pair_i, pair_j, nvec, r, xi, cutoff, params)
-
-
-def contact_history3d(pairs: dict, contacts, n_particles: int, kn_coefficient: float) -> dict:
-    """Per pair of ``pairs``: the tangential ``stretch`` (P, 3) [delta_sigma] and ``sliding`` (P,) from
-    the recorded ``contacts`` = (pairs (C, 2), states (C,), stretches (C, 3) [a]) of one snapshot, as the
-    2D ``contact_history``."""
-    recorded, states, stretches = contacts
-    recorded = np.asarray(recorded, dtype=np.int64).reshape(-1, 2)
-    stretches = np.asarray(stretches, dtype=np.float64).reshape(-1, 3)
-    key = np.minimum(recorded[:, 0], recorded[:, 1]) * n_particles + np.maximum(
-        recorded[:, 0], recorded[:, 1]
-    )
-    lookup = {int(k): c for c, k in enumerate(key)}
-    stretch = np.zeros((pairs["i"].size, 3))
-    sliding = np.zeros(pairs["i"].size, dtype=bool)
-    unit = overlap_unit(kn_coefficient)
-    for p, (i, j) in enumerate(zip(pairs["i"], pairs["j"])):
-        c = lookup.get(int(min(i, j)) * n_particles + int(max(i, j)))
-        if c is None:
-            continue
-        sign = -1.0 if (recorded[c, 0] > recorded[c, 1]) != (i > j) else 1.0
-        stretch[p] = sign * stretches[c] / unit
-        sliding[p] = states[c] == SLIDE
-    return {"stretch": stretch, "sliding": sliding}
 
 
 def snapshot_edges3d(positions, radii, box3, cutoff, params, contacts=None):
@@ -133,7 +102,7 @@ def snapshot_edges3d(positions, radii, box3, cutoff, params, contacts=None):
         "frictional": ((load > np.arcsinh(1.0)).astype(np.float64), 1.0),
     }
     if contacts is not None:
-        history = contact_history3d(p, contacts, radii.size, float(params["kn_coefficient"]))
+        history = contact_history(p, contacts, radii.size, float(params["kn_coefficient"]), dim=3)
         s = history["stretch"]
         pair_features["tangential_stretch"] = (np.sqrt((s**2).sum(axis=1)), 1.0)
         pair_features["sliding"] = (history["sliding"].astype(np.float64), 1.0)
@@ -176,22 +145,5 @@ def relax_positions3d(
 ) -> Relaxation:
     """The 2D ``relax_positions`` with the 3D simulator: the snapshot sheared by ``strain`` at its
     imposed stress; the returned ``positions`` are (N, 3) and ``pressure`` is -tr(sigma)/3."""
-    sim_params, sim = _simulation(positions, radii, box3, params)
-    viscosity_early = math.nan
-    for _ in range(RELAX_MAX_STEPS if max_steps is None else max_steps):
-        if sim.state.strain >= strain:
-            break
-        result = sim.step()
-        if math.isnan(viscosity_early) and sim.state.strain >= 0.25 * strain:
-            viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
-    relaxed = sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)
-    result = sim.step(record=True)
-    if math.isnan(viscosity_early):
-        viscosity_early = _viscosity(sim_params.stress, result.shear_rate)
-    return Relaxation(
-        *relaxed,
-        viscosity=_viscosity(sim_params.stress, result.shear_rate),
-        pressure=particle_pressure(result.stress),
-        z_mu=2.0 * result.n_frictional / sim.state.radii.size,
-        viscosity_early=viscosity_early,
-    )
+    _, sim = _simulation(positions, radii, box3, params)
+    return relax_simulation(sim, strain, max_steps, lambda result: particle_pressure(result.stress))

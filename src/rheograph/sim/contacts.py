@@ -19,42 +19,44 @@ SLIDE = 3
 
 @njit(cache=True)
 def critical_load_update(radii, pair_i, pair_j, nvec, xi, stretch, state, kn, kt, mu, critical_load):
-    """Apply the CLM at the current geometry, in place on ``stretch`` and ``state``.
+    """Apply the CLM at the current geometry, in place on ``stretch`` (P, d) and ``state`` (P,), with the
+    unit normals ``nvec`` (P, d) and reduced gaps ``xi`` (P,); the same in any dimension d.
 
     Pairs that left contact lose their stretch.  In contact the stretch is first projected onto the
-    current tangent; if the normal spring force is below the critical load the contact is frictionless
-    and the stretch is reset (the CLM's loss of frictional memory); otherwise the tangential force is
-    bounded by mu (F_n - F_CL): beyond it the contact slides and the stretch is rescaled onto the bound.
-    Returns the number of frictional (stick or slide) contacts.
+    current tangent (plane); if the normal spring force is below the critical load the contact is
+    frictionless and the stretch is reset (the CLM's loss of frictional memory); otherwise the tangential
+    force is bounded by mu (F_n - F_CL): beyond it the contact slides and the stretch is rescaled onto the
+    bound.  Returns the number of frictional (stick or slide) contacts.
     """
+    dim = nvec.shape[1]
     n_frictional = 0
     for p in range(pair_i.shape[0]):
         if xi[p] > 0.0:
             state[p] = NONE
-            stretch[p, 0] = 0.0
-            stretch[p, 1] = 0.0
+            stretch[p, :] = 0.0
             continue
         abar = 0.5 * (radii[pair_i[p]] + radii[pair_j[p]])
         overlap = -xi[p] * abar
         f_normal = kn * abar * overlap
-        nx = nvec[p, 0]
-        ny = nvec[p, 1]
-        sn = stretch[p, 0] * nx + stretch[p, 1] * ny
-        stretch[p, 0] -= sn * nx
-        stretch[p, 1] -= sn * ny
+        sn = stretch[p, 0] * nvec[p, 0]
+        for c in range(1, dim):
+            sn += stretch[p, c] * nvec[p, c]
+        for c in range(dim):
+            stretch[p, c] -= sn * nvec[p, c]
         if mu <= 0.0 or f_normal < critical_load:
             state[p] = FRICTIONLESS
-            stretch[p, 0] = 0.0
-            stretch[p, 1] = 0.0
+            stretch[p, :] = 0.0
             continue
         n_frictional += 1
         capacity = mu * (f_normal - critical_load)
-        s = np.sqrt(stretch[p, 0] ** 2 + stretch[p, 1] ** 2)
-        f_tan = kt * abar * s
+        s2 = stretch[p, 0] ** 2
+        for c in range(1, dim):
+            s2 += stretch[p, c] ** 2
+        f_tan = kt * abar * np.sqrt(s2)
         if f_tan > capacity:
             scale = capacity / f_tan
-            stretch[p, 0] *= scale
-            stretch[p, 1] *= scale
+            for c in range(dim):
+                stretch[p, c] *= scale
             state[p] = SLIDE
         else:
             state[p] = STICK

@@ -1,12 +1,12 @@
 """Frictional contacts between spheres in 3D: linear springs, Critical Load Model (CLM), Coulomb sliding.
 
-Units and states as in ``rheograph.sim.contacts`` (forces in F_CL, lengths in a; NONE, FRICTIONLESS,
-STICK, SLIDE).  The tangential stretch is a 3-vector per pair (P, 3): the relative sliding displacement
-of j's surface with respect to i's at the contact point.  It is advanced with the sliding velocity
-(already tangent) before the particles move, and after they move it is projected onto the plane normal
-to the new n, as LF_DEM does: no rigid rotation with the pair, so |stretch| loses a second-order amount
-when the pair rolls, and the stretch stays fixed in the lab frame when the pair spins about n.  There is
-no twisting or rolling spring.
+Units, states (NONE, FRICTIONLESS, STICK, SLIDE) and the CLM update ``critical_load_update`` (on stretches
+of any length) are ``rheograph.sim.contacts``'s: forces in F_CL, lengths in a.  The tangential stretch is
+a 3-vector per pair (P, 3): the relative sliding displacement of j's surface with respect to i's at the
+contact point.  It is advanced with the sliding velocity (already tangent) before the particles move, and
+after they move it is projected onto the plane normal to the new n, as LF_DEM does: no rigid rotation with
+the pair, so |stretch| loses a second-order amount when the pair rolls, and the stretch stays fixed in the
+lab frame when the pair spins about n.  There is no twisting or rolling spring.
 
 Degrees of freedom per particle: 6, ordered [U (3), w (3)] (non-affine); the affine flow at shear rate
 g is U = g y e_x and w = -g/2 e_z.
@@ -15,47 +15,7 @@ g is U = g y e_x and w = -g/2 e_z.
 import numpy as np
 from numba import njit
 
-from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK
-
-
-@njit(cache=True)
-def critical_load_update(radii, pair_i, pair_j, nvec, xi, stretch, state, kn, kt, mu, critical_load):
-    """Apply the CLM at the current geometry, in place on ``stretch`` (P, 3) and ``state`` (P,).
-
-    Pairs that left contact lose their stretch.  In contact the stretch is first projected onto the plane
-    normal to the current n; if the normal spring force is below the critical load the contact is
-    frictionless and the stretch is reset; otherwise the tangential force is bounded by mu (F_n - F_CL):
-    beyond it the contact slides and the stretch is rescaled onto the bound.
-    Returns the number of frictional (stick or slide) contacts.
-    """
-    n_frictional = 0
-    for p in range(pair_i.shape[0]):
-        if xi[p] > 0.0:
-            state[p] = NONE
-            stretch[p, :] = 0.0
-            continue
-        abar = 0.5 * (radii[pair_i[p]] + radii[pair_j[p]])
-        overlap = -xi[p] * abar
-        f_normal = kn * abar * overlap
-        sn = stretch[p, 0] * nvec[p, 0] + stretch[p, 1] * nvec[p, 1] + stretch[p, 2] * nvec[p, 2]
-        for c in range(3):
-            stretch[p, c] -= sn * nvec[p, c]
-        if mu <= 0.0 or f_normal < critical_load:
-            state[p] = FRICTIONLESS
-            stretch[p, :] = 0.0
-            continue
-        n_frictional += 1
-        capacity = mu * (f_normal - critical_load)
-        s = np.sqrt(stretch[p, 0] ** 2 + stretch[p, 1] ** 2 + stretch[p, 2] ** 2)
-        f_tan = kt * abar * s
-        if f_tan > capacity:
-            scale = capacity / f_tan
-            for c in range(3):
-                stretch[p, c] *= scale
-            state[p] = SLIDE
-        else:
-            state[p] = STICK
-    return n_frictional
+from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK, critical_load_update
 
 
 @njit(cache=True)

@@ -50,6 +50,22 @@ def _cell_of(x, origin, width, ncell):
 
 
 @njit(cache=True)
+def _append(pi, pj, npair, i, j):
+    """Store pair (i, j) at index ``npair`` of the pair arrays, which are doubled when full (the pair
+    count is not known in advance); returns the arrays."""
+    if npair == pi.shape[0]:
+        pi2 = np.empty(2 * npair, dtype=np.int64)
+        pj2 = np.empty(2 * npair, dtype=np.int64)
+        pi2[:npair] = pi
+        pj2[:npair] = pj
+        pi = pi2
+        pj = pj2
+    pi[npair] = i
+    pj[npair] = j
+    return pi, pj
+
+
+@njit(cache=True)
 def neighbour_pairs(pos, radii, lx, ly, le_offset, max_gap_scaled, skin):
     """All pairs i < j with centre distance r < a_i + a_j + max_gap_scaled * (a_i + a_j)/2 + skin.
 
@@ -75,9 +91,8 @@ def neighbour_pairs(pos, radii, lx, ly, le_offset, max_gap_scaled, skin):
         c = cy * ncx + cx
         nxt[i] = head[c]
         head[c] = i
-    cap = 16 * n
-    pi = np.empty(cap, dtype=np.int64)
-    pj = np.empty(cap, dtype=np.int64)
+    pi = np.empty(16 * n, dtype=np.int64)
+    pj = np.empty(16 * n, dtype=np.int64)
     npair = 0
     for i in range(n):
         xi = pos[i, 0]
@@ -103,16 +118,7 @@ def neighbour_pairs(pos, radii, lx, ly, le_offset, max_gap_scaled, skin):
                         aj = radii[j]
                         cut = (ai + aj) * (1.0 + 0.5 * max_gap_scaled) + skin
                         if dx * dx + dy * dy < cut * cut:
-                            if npair == cap:
-                                cap *= 2
-                                pi2 = np.empty(cap, dtype=np.int64)
-                                pj2 = np.empty(cap, dtype=np.int64)
-                                pi2[:npair] = pi[:npair]
-                                pj2[:npair] = pj[:npair]
-                                pi = pi2
-                                pj = pj2
-                            pi[npair] = i
-                            pj[npair] = j
+                            pi, pj = _append(pi, pj, npair, i, j)
                             npair += 1
                     j = nxt[j]
     return _sort_pairs(pi[:npair], pj[:npair], n)
@@ -122,21 +128,17 @@ def neighbour_pairs(pos, radii, lx, ly, le_offset, max_gap_scaled, skin):
 def brute_force_pairs(pos, radii, lx, ly, le_offset, max_gap_scaled, skin):
     """O(N^2) reference for ``neighbour_pairs`` (also used when the box holds fewer than 3 cells)."""
     n = pos.shape[0]
-    out_i = []
-    out_j = []
+    pi = np.empty(max(n, 1), dtype=np.int64)
+    pj = np.empty(max(n, 1), dtype=np.int64)
+    npair = 0
     for i in range(n):
         for j in range(i + 1, n):
             dx, dy = minimum_image(pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1], lx, ly, le_offset)
             cut = (radii[i] + radii[j]) * (1.0 + 0.5 * max_gap_scaled) + skin
             if dx * dx + dy * dy < cut * cut:
-                out_i.append(i)
-                out_j.append(j)
-    pi = np.empty(len(out_i), dtype=np.int64)
-    pj = np.empty(len(out_j), dtype=np.int64)
-    for k in range(len(out_i)):
-        pi[k] = out_i[k]
-        pj[k] = out_j[k]
-    return _sort_pairs(pi, pj, n)
+                pi, pj = _append(pi, pj, npair, i, j)
+                npair += 1
+    return _sort_pairs(pi[:npair], pj[:npair], n)
 
 
 @njit(cache=True)

@@ -14,51 +14,26 @@ All lengths in units of the small radius a.
 import numpy as np
 from numba import njit
 
-from rheograph.sim.geometry import _cell_of, _sort_pairs
+from rheograph.sim import geometry
+from rheograph.sim.geometry import _append, _cell_of, _sort_pairs
 
 
 @njit(cache=True)
 def minimum_image(dx, dy, dz, lx, ly, lz, le_offset):
-    """Minimum-image pair vector with Lees–Edwards images: y first (with the offset), then x, then z."""
-    if dy > 0.5 * ly:
-        dy -= ly
-        dx -= le_offset
-    elif dy < -0.5 * ly:
-        dy += ly
-        dx += le_offset
-    dx -= lx * np.floor(dx / lx + 0.5)
+    """Minimum-image pair vector with Lees–Edwards images: (x, y) as in 2D (y first, with the offset, then
+    x), then z, plainly periodic."""
+    dx, dy = geometry.minimum_image(dx, dy, lx, ly, le_offset)
     dz -= lz * np.floor(dz / lz + 0.5)
     return dx, dy, dz
 
 
 @njit(cache=True)
 def wrap_positions(pos, lx, ly, lz, le_offset):
-    """Wrap positions (N, 3) into the primary box in place; crossing the top/bottom (y) face shifts x by
-    -/+ le_offset."""
+    """Wrap positions (N, 3) into the primary box in place: (x, y) as in 2D (crossing the top/bottom y
+    face shifts x by -/+ le_offset), then z."""
+    geometry.wrap_positions(pos, lx, ly, le_offset)
     for i in range(pos.shape[0]):
-        y = pos[i, 1]
-        if y >= 0.5 * ly:
-            pos[i, 1] = y - ly
-            pos[i, 0] -= le_offset
-        elif y < -0.5 * ly:
-            pos[i, 1] = y + ly
-            pos[i, 0] += le_offset
-        pos[i, 0] -= lx * np.floor(pos[i, 0] / lx + 0.5)
         pos[i, 2] -= lz * np.floor(pos[i, 2] / lz + 0.5)
-
-
-@njit(cache=True)
-def _append(pi, pj, npair, i, j):
-    if npair == pi.shape[0]:  # grow by doubling: the pair count is not known in advance
-        pi2 = np.empty(2 * npair, dtype=np.int64)
-        pj2 = np.empty(2 * npair, dtype=np.int64)
-        pi2[:npair] = pi
-        pj2[:npair] = pj
-        pi = pi2
-        pj = pj2
-    pi[npair] = i
-    pj[npair] = j
-    return pi, pj
 
 
 @njit(cache=True)

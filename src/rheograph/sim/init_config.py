@@ -60,35 +60,51 @@ def random_configuration(
     phi = np.pi * np.sum(true_radii**2) / box_length**2
     inflate = min(1.0 + min_gap, max(1.0, np.sqrt(0.80 / phi)))
     radii = true_radii * inflate
-    n = radii.shape[0]
-    pos = (rng.random((n, 2)) - 0.5) * box_length
-    lx = ly = float(box_length)
+    pos = (rng.random((radii.shape[0], 2)) - 0.5) * box_length
+    edges = (float(box_length), float(box_length))
+    kernels = (neighbour_pairs, _overlap_step, wrap_positions)
+    relax_overlaps(pos, radii, edges, kernels, tolerance, max_iterations, phi, "area fraction", "jamming")
+    return pos, true_radii
+
+
+def relax_overlaps(pos, radii, edges, kernels, tolerance, max_iterations, phi, fraction, packing) -> None:
+    """Remove the overlaps of particles of ``radii`` (N,) at ``pos`` (N, d) [a] in place by gradient
+    descent on E = 1/2 sum overlap^2, in an unsheared periodic box of ``edges`` (d,) [a]; any dimension
+    d, whose kernels are ``kernels`` = (neighbour_pairs(pos, radii, *edges, le_offset, gap, skin),
+    overlap_step(pos, radii, pair_i, pair_j, *edges, step), wrap_positions(pos, *edges, le_offset)).
+
+    Done when the largest overlap, checked on a fresh neighbour list, is below ``tolerance`` [a]; raises
+    StatePointError after ``max_iterations`` steps, naming the ``fraction`` ``phi`` and that it is too
+    close to ``packing``.
+    """
+    neighbour_pairs, overlap_step, wrap_positions = kernels
     max_overlap = np.inf
     pairs = None
     for it in range(max_iterations):
         # large early overlaps move particles far: rebuild every step until they are small
         if pairs is None or max_overlap > 0.02 or it % 10 == 0:
-            pairs = neighbour_pairs(pos, radii, lx, ly, 0.0, 0.0, 0.5)
-        max_overlap = _overlap_step(pos, radii, pairs[0], pairs[1], lx, ly, 0.25)
-        wrap_positions(pos, lx, ly, 0.0)
+            pairs = neighbour_pairs(pos, radii, *edges, 0.0, 0.0, 0.5)
+        max_overlap = overlap_step(pos, radii, pairs[0], pairs[1], *edges, 0.25)
+        wrap_positions(pos, *edges, 0.0)
         if max_overlap < tolerance:
-            fresh = neighbour_pairs(pos, radii, lx, ly, 0.0, 0.0, 0.5)
-            if _overlap_step(pos.copy(), radii, fresh[0], fresh[1], lx, ly, 0.0) < tolerance:
-                return pos, true_radii
+            fresh = neighbour_pairs(pos, radii, *edges, 0.0, 0.0, 0.5)
+            if overlap_step(pos.copy(), radii, fresh[0], fresh[1], *edges, 0.0) < tolerance:
+                return
             pairs = fresh
     raise StatePointError(
-        f"sim.phi: could not relax the initial configuration at area fraction {phi:.4g}: max overlap "
+        f"sim.phi: could not relax the initial configuration at {fraction} {phi:.4g}: max overlap "
         f"{max_overlap:.2e} > sim.relax_tolerance={tolerance:.1e} after {max_iterations} iterations "
-        "(too close to jamming: lower sim.phi or raise sim.relax_tolerance)"
+        f"(too close to {packing}: lower sim.phi or raise sim.relax_tolerance)"
     )
 
 
-def initial_configuration(params) -> tuple[np.ndarray, np.ndarray, float]:
+def initial_configuration(params, generator=random_configuration) -> tuple[np.ndarray, np.ndarray, float]:
     """The start of a state point: (positions (N, 2), radii (N,), box length) for a ``SimParams``, from its
-    seed — what ``Simulation(params)`` starts from, and what the LF_DEM comparison writes for LF_DEM."""
+    seed — what ``Simulation(params)`` starts from, and what the LF_DEM comparison writes for LF_DEM.
+    ``generator``: the dimension's ``random_configuration`` (``init_config3d``'s for (N, 3) in a cube)."""
     n_small, n_large = params.species_counts()
     box = params.box_length()
-    pos, radii = random_configuration(
+    pos, radii = generator(
         n_small,
         n_large,
         params.size_ratio,

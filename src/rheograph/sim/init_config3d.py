@@ -3,7 +3,7 @@
 import numpy as np
 from numba import njit
 
-from rheograph.errors import StatePointError
+from rheograph.sim import init_config
 from rheograph.sim.geometry3d import minimum_image, neighbour_pairs, wrap_positions
 from rheograph.sim.radii import bidisperse_radii
 
@@ -12,7 +12,7 @@ INFLATED_PHI_MAX = 0.60
 
 
 @njit(cache=True)
-def _overlap_step(pos, radii, pair_i, pair_j, box, step):
+def _overlap_step(pos, radii, pair_i, pair_j, lx, ly, lz, step):
     """One gradient-descent step on E = 1/2 sum overlap^2; returns the max overlap before the step."""
     disp = np.zeros_like(pos)
     max_overlap = 0.0
@@ -20,7 +20,7 @@ def _overlap_step(pos, radii, pair_i, pair_j, box, step):
         i = pair_i[p]
         j = pair_j[p]
         dx, dy, dz = minimum_image(
-            pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1], pos[j, 2] - pos[i, 2], box, box, box, 0.0
+            pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1], pos[j, 2] - pos[i, 2], lx, ly, lz, 0.0
         )
         r = np.sqrt(dx * dx + dy * dy + dz * dz)
         ov = radii[i] + radii[j] - r
@@ -59,35 +59,15 @@ def random_configuration(
     phi = 4.0 * np.pi / 3.0 * np.sum(true_radii**3) / box_length**3
     inflate = min(1.0 + min_gap, max(1.0, (INFLATED_PHI_MAX / phi) ** (1.0 / 3.0)))
     radii = true_radii * inflate
-    n = radii.shape[0]
-    pos = (rng.random((n, 3)) - 0.5) * box_length
-    box = float(box_length)
-    max_overlap = np.inf
-    pairs = None
-    for it in range(max_iterations):
-        # large early overlaps move particles far: rebuild every step until they are small
-        if pairs is None or max_overlap > 0.02 or it % 10 == 0:
-            pairs = neighbour_pairs(pos, radii, box, box, box, 0.0, 0.0, 0.5)
-        max_overlap = _overlap_step(pos, radii, pairs[0], pairs[1], box, 0.25)
-        wrap_positions(pos, box, box, box, 0.0)
-        if max_overlap < tolerance:
-            fresh = neighbour_pairs(pos, radii, box, box, box, 0.0, 0.0, 0.5)
-            if _overlap_step(pos.copy(), radii, fresh[0], fresh[1], box, 0.0) < tolerance:
-                return pos, true_radii
-            pairs = fresh
-    raise StatePointError(
-        f"sim.phi: could not relax the initial configuration at volume fraction {phi:.4g}: max overlap "
-        f"{max_overlap:.2e} > sim.relax_tolerance={tolerance:.1e} after {max_iterations} iterations "
-        "(too close to random close packing: lower sim.phi or raise sim.relax_tolerance)"
+    pos = (rng.random((radii.shape[0], 3)) - 0.5) * box_length
+    edges = (float(box_length),) * 3
+    kernels = (neighbour_pairs, _overlap_step, wrap_positions)
+    init_config.relax_overlaps(
+        pos, radii, edges, kernels, tolerance, max_iterations, phi, "volume fraction", "random close packing"
     )
+    return pos, true_radii
 
 
 def initial_configuration(params) -> tuple[np.ndarray, np.ndarray, float]:
     """The start of a 3D state point: (positions (N, 3), radii (N,), cube edge) for a ``SimParams3D``."""
-    n_small, n_large = params.species_counts()
-    box = params.box_length()
-    pos, radii = random_configuration(
-        n_small, n_large, params.size_ratio, box, params.seed, params.relax_tolerance, params.initial_min_gap,
-        radii=params.particle_radii(),
-    )  # fmt: skip
-    return pos, radii, box
+    return init_config.initial_configuration(params, random_configuration)

@@ -15,8 +15,11 @@ Integrators:
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import time as wallclock
+from abc import ABC, abstractmethod
 from collections import defaultdict
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -112,14 +115,15 @@ def _transfer_contacts(old_i, old_j, old_stretch, old_state, new_i, new_j, n):
 
 
 class LinearProblem(NamedTuple):
-    """One step's pair geometry, contact classification and linear system (``linear_problem``).
+    """One step's pair geometry, contact classification and linear system (``linear_problem``; in 3D
+    ``integrator3d.linear_problem``, with d = 3 and 6 degrees of freedom per particle).
 
-    Per listed pair (P rows): unit normal i -> j ``nvec`` (P, 2), distance ``r`` [a], reduced gap ``xi``,
-    minimum-image y-separation ``dy`` [a], lubrication coefficients ``coeff`` (P, 36), the masks
+    Per listed pair (P rows): unit normal i -> j ``nvec`` (P, d), distance ``r`` [a], reduced gap ``xi``,
+    minimum-image y-separation ``dy`` [a], lubrication coefficients ``coeff``, the masks
     ``lubricated`` / ``in_contact`` / ``active``, dt times the implicit spring stiffnesses ``k_normal``,
-    ``k_tangential``, the spring force on i ``f_on_i`` (P, 2) [F_CL].  The system: matrix ``data`` on the
-    upper-triangle pattern, right-hand sides ``rhs`` (2, 3N) (row 0 springs, row 1 unit-rate affine flow).
-    Counts: interacting pairs, contacts, frictional contacts.
+    ``k_tangential``, the spring force on i ``f_on_i`` (P, d) [F_CL].  The system: matrix ``data`` on the
+    upper-triangle pattern, right-hand sides ``rhs`` (2, 3N in 2D, 6N in 3D) (row 0 springs, row 1
+    unit-rate affine flow).  Counts: interacting pairs, contacts, frictional contacts.
     """
 
     nvec: np.ndarray
@@ -138,6 +142,36 @@ class LinearProblem(NamedTuple):
     n_active: int
     n_contacts: int
     n_frictional: int
+
+
+@njit(cache=True)
+def classify_pairs(radii, pair_i, pair_j, xi, contact_state, kn, kt, lub_max_gap, dt_implicit):
+    """Masks of the listed pairs (P,) by reduced gap ``xi``: ``in_contact`` (xi <= 0), ``lubricated``
+    (0 < xi < lub_max_gap), ``active`` (either); dt_implicit times the spring stiffnesses ``k_normal``
+    (contacts) and ``k_tangential`` (sticking contacts) [F_CL a^-1 time], zero when ``dt_implicit`` is 0
+    (explicit Euler).  Returns (in_contact, lubricated, active, k_normal, k_tangential, number active,
+    number in contact); the same in any dimension."""
+    npair = pair_i.shape[0]
+    in_contact = np.empty(npair, dtype=np.bool_)
+    lubricated = np.empty(npair, dtype=np.bool_)
+    active = np.empty(npair, dtype=np.bool_)
+    k_normal = np.zeros(npair)
+    k_tangential = np.zeros(npair)
+    n_active = 0
+    n_contacts = 0
+    for p in range(npair):
+        in_contact[p] = xi[p] <= 0.0
+        lubricated[p] = (xi[p] > 0.0) and (xi[p] < lub_max_gap)
+        active[p] = in_contact[p] or lubricated[p]
+        n_active += active[p]
+        n_contacts += in_contact[p]
+        if dt_implicit > 0.0:
+            abar = 0.5 * (radii[pair_i[p]] + radii[pair_j[p]])
+            if in_contact[p]:
+                k_normal[p] = kn * abar * dt_implicit
+            if contact_state[p] == contacts.STICK:
+                k_tangential[p] = kt * abar * dt_implicit
+    return in_contact, lubricated, active, k_normal, k_tangential, n_active, n_contacts
 
 
 @njit(cache=True)
@@ -177,26 +211,9 @@ def linear_problem(
     n_frictional = contacts.critical_load_update(
         radii, pair_i, pair_j, nvec, xi, stretch, contact_state, kn, kt, mu, critical_load
     )
-    npair = pair_i.shape[0]
-    in_contact = np.empty(npair, dtype=np.bool_)
-    lubricated = np.empty(npair, dtype=np.bool_)
-    active = np.empty(npair, dtype=np.bool_)
-    k_normal = np.zeros(npair)
-    k_tangential = np.zeros(npair)
-    n_active = 0
-    n_contacts = 0
-    for p in range(npair):
-        in_contact[p] = xi[p] <= 0.0
-        lubricated[p] = (xi[p] > 0.0) and (xi[p] < lub_max_gap)
-        active[p] = in_contact[p] or lubricated[p]
-        n_active += active[p]
-        n_contacts += in_contact[p]
-        if dt_implicit > 0.0:
-            abar = 0.5 * (radii[pair_i[p]] + radii[pair_j[p]])
-            if in_contact[p]:
-                k_normal[p] = kn * abar * dt_implicit
-            if contact_state[p] == contacts.STICK:
-                k_tangential[p] = kt * abar * dt_implicit
+    in_contact, lubricated, active, k_normal, k_tangential, n_active, n_contacts = classify_pairs(
+        radii, pair_i, pair_j, xi, contact_state, kn, kt, lub_max_gap, dt_implicit
+    )
     coeff = lubrication_resistance(radii, pair_i, pair_j, xi, active, delta)
     data, rhs_rate = assemble_resistance(
         radii,
@@ -226,27 +243,37 @@ def linear_problem(
 
 
 @njit(cache=True)
-def _move(pos, vel, displacement, shear_rate, dt):
-    """Explicit Euler move with the affine flow u = shear_rate * y e_x; returns max |non-affine disp.|."""
+def move(pos, vel, displacement, shear_rate, dt):
+    """Explicit Euler move of positions (N, d) [a] with the non-affine velocities ``vel`` (the
+    translations are the first d of each particle's vel.shape[0] / N degrees of freedom) plus the affine
+    flow u = shear_rate * y e_x, accumulating the non-affine ``displacement`` (N, d) [a]; returns the
+    largest |displacement|.  Any dimension d."""
+    dim = pos.shape[1]
+    dof = vel.shape[0] // pos.shape[0]
     dmax = 0.0
     for i in range(pos.shape[0]):
-        ux = vel[3 * i]
-        uy = vel[3 * i + 1]
-        pos[i, 0] += (ux + shear_rate * pos[i, 1]) * dt
-        pos[i, 1] += uy * dt
-        displacement[i, 0] += ux * dt
-        displacement[i, 1] += uy * dt
-        d = displacement[i, 0] ** 2 + displacement[i, 1] ** 2
+        pos[i, 0] += (vel[dof * i] + shear_rate * pos[i, 1]) * dt
+        for c in range(1, dim):
+            pos[i, c] += vel[dof * i + c] * dt
+        displacement[i, 0] += vel[dof * i] * dt
+        d = displacement[i, 0] ** 2
+        for c in range(1, dim):
+            displacement[i, c] += vel[dof * i + c] * dt
+            d += displacement[i, c] ** 2
         if d > dmax:
             dmax = d
     return np.sqrt(dmax)
 
 
 @njit(cache=True)
-def _max_translation_speed(vel):
+def max_translation_speed(vel, dim, dof):
+    """Largest translation speed |U_i| of the velocities ``vel`` (N dof,), whose first ``dim`` entries
+    per particle are the translation."""
     vmax = 0.0
-    for i in range(vel.shape[0] // 3):
-        v = vel[3 * i] ** 2 + vel[3 * i + 1] ** 2
+    for i in range(vel.shape[0] // dof):
+        v = vel[dof * i] ** 2
+        for c in range(1, dim):
+            v += vel[dof * i + c] ** 2
         if v > vmax:
             vmax = v
     return np.sqrt(vmax)
@@ -273,7 +300,7 @@ def _advance(
     """Move by dt: contact stretches, positions (affine + non-affine), Lees-Edwards offset, wrapping.
     Returns (largest non-affine displacement since the list was built, new offset)."""
     contacts.increment_stretch(vel, radii, pair_i, pair_j, nvec, dy, contact_state, stretch, shear_rate, dt)
-    max_displacement = _move(positions, vel, displacement, shear_rate, dt)
+    max_displacement = move(positions, vel, displacement, shear_rate, dt)
     le_offset = wrap_offset(le_offset + shear_rate * ly * dt, lx)
     wrap_positions(positions, lx, ly, le_offset)
     return max_displacement, le_offset
@@ -282,26 +309,38 @@ def _advance(
 DT_GROWTH = 1.2  # largest growth of dt between steps of the implicit integrator
 
 
-class Simulation:
-    """A 2D LF-DEM run of one state point, under stress (default) or rate control (``params.control``).
+class SimulationBase(ABC):
+    """The LF-DEM driver of any dimension: neighbour-list upkeep, the step (solve, shear rate from the
+    stress target or the imposed rate, adaptive dt, move) and its timings.  ``Simulation`` (2D) and
+    ``integrator3d.Simulation3D`` supply the dimension's kernels through the class attributes and the
+    methods ``edges``, ``new_state``, ``one_body_drag``, ``linear_problem`` and ``stress_sums``.
 
-    >>> sim = Simulation(SimParams(n_particles=100, phi=0.7, stress=1.0))
-    >>> result = sim.step(record=True)
+    ``velocity`` holds the last step's non-affine velocities (N DOF,); ``stress_factor`` converts
+    stresslet sums to sigma0 (6 pi / box area or volume); ``drag`` is the one-body Stokes drag per degree
+    of freedom [6 pi eta0].
     """
+
+    # a dimension's class attributes: DIM (space dimension), DOF (degrees of freedom per particle, the
+    # DIM translations first), SOLVENT_UNIT (2 eta0 E at unit rate [sigma0], in the stress's order) and
+    # its kernels neighbour_pairs(positions, radii, *edges, le_offset, gap, skin),
+    # max_interaction_speed(vel, radii, i, j, nvec, dy, active, state, rate) and advance_kernel(positions,
+    # displacement, vel, radii, i, j, nvec, dy, state, stretch, rate, dt, *edges, le_offset)
+    DIM: int
+    DOF: int
+    SOLVENT_UNIT: np.ndarray
 
     def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "auto"):
         self.params = params
         # refused before the initial configuration or any matrix is allocated
-        check_simulation_memory(params.n_particles)
+        check_simulation_memory(params.n_particles, dim=self.DIM)
         if state is None:
-            pos, radii, box = initial_configuration(params)
-            state = SimState(positions=pos, radii=radii, lx=box, ly=box)
+            state = self.new_state(params)
         self.state = state
         self.solver = make_solver(solver)
-        self.stress_factor = stress_unit_factor(state.lx, state.ly)
+        self.stress_factor = stress_unit_factor(*self.edges())
         self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
-        # one-body Stokes drag per degree of freedom (translation a, rotation 4 a^3 / 3) [6 pi eta0]
-        self.drag = np.stack([state.radii, state.radii, 4.0 * state.radii**3 / 3.0], axis=1).ravel()
+        self.drag = self.one_body_drag(state.radii)
+        self.velocity = np.zeros(self.DOF * state.radii.shape[0])
         self.max_displacement = 0.0
         self.timings: dict[str, float] = defaultdict(float)  # wall seconds per phase, for benchmarks
         # dt assumed by the implicit spring terms; saved in checkpoints via SimState.dt_assumed
@@ -314,22 +353,74 @@ class Simulation:
         if state.displacement is not None:
             self.max_displacement = float(np.sqrt((state.displacement**2).sum(axis=1).max()))
 
+    # ---- what a dimension supplies ------------------------------------------------------------
+    @abstractmethod
+    def edges(self) -> tuple[float, ...]:
+        """The box edges (lx, ly[, lz]) [a], as the kernels take them."""
+
+    @staticmethod
+    @abstractmethod
+    def new_state(params: SimParams) -> SimState:
+        """The state at the start of a state point (its seeded random configuration)."""
+
+    @staticmethod
+    @abstractmethod
+    def one_body_drag(radii: np.ndarray) -> np.ndarray:
+        """Stokes drag per degree of freedom (N DOF,) [6 pi eta0] of particles of ``radii`` (N,)."""
+
+    @abstractmethod
+    def linear_problem(self) -> LinearProblem:
+        """The current step's linear problem (updates the contact states in place, as a step does)."""
+
+    @abstractmethod
+    def stress_sums(self, vel_const, vel_rate, lp: LinearProblem, record: bool) -> tuple:
+        """Stresslet sums (lubrication, dashpot) of the rate-independent velocities ``vel_const`` and of
+        the unit-rate ones ``vel_rate``, and the spring virial: (lub0, dash0, lub1, dash1, spring), in the
+        stress's component order [F_CL a]; ``record``: all components, else at least xy."""
+
+    def advance(self, vel, lp: LinearProblem, shear_rate: float, dt: float) -> None:
+        """Move the state by dt with the velocities ``vel`` (stretches, positions, Lees-Edwards offset,
+        wrapping: the dimension's ``advance_kernel``); sets ``max_displacement``."""
+        s = self.state
+        self.max_displacement, s.le_offset = self.advance_kernel(
+            s.positions, s.displacement, vel, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, s.contact_state,
+            s.stretch, shear_rate, dt, *self.edges(), s.le_offset,
+        )  # fmt: skip
+
+    def solve_configuration(self, passes: int = 2) -> StepResult:
+        """The result of one step from the configuration this simulation was started from, which must be
+        fresh (no step taken): the resistance solve of a snapshot, whose tangential springs start
+        unstretched.  dt is set as a running simulation sets it: each of ``passes`` solves starts again
+        from the same configuration and assumes DT_GROWTH x the dt the previous one would step with (the
+        first, ``disp_max``).  The state is left as after the last pass's step; the neighbour list, the
+        sparsity pattern and the symbolic factorisation are made once (a third of a pass's cost)."""
+        if self.state.steps:
+            raise ValueError("solve_configuration needs a fresh simulation (no step taken)")
+        start = copy.deepcopy(self.state)
+        for k in range(passes):
+            if k:
+                # step() has left dt_assumed at DT_GROWTH x its dt (at most dt_max): the next pass assumes it
+                self.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=self.state.dt_assumed)
+                self.max_displacement = 0.0
+            result = self.step()
+        return result
+
     # ---- neighbour list and sparsity pattern --------------------------------------------------
     def _rebuild_neighbours(self) -> None:
         s, p = self.state, self.params
-        new_i, new_j = neighbour_pairs(
-            s.positions, s.radii, s.lx, s.ly, s.le_offset, p.lub_max_gap, p.neighbour_skin
+        new_i, new_j = self.neighbour_pairs(
+            s.positions, s.radii, *self.edges(), s.le_offset, p.lub_max_gap, p.neighbour_skin
         )
         n = s.radii.shape[0]
         if s.pair_i is None:
-            s.stretch = np.zeros((new_i.shape[0], 2))
+            s.stretch = np.zeros((new_i.shape[0], self.DIM))
             s.contact_state = np.zeros(new_i.shape[0], dtype=np.int8)
         else:
             s.stretch, s.contact_state = _transfer_contacts(
                 s.pair_i, s.pair_j, s.stretch, s.contact_state, new_i, new_j, n
             )
         s.pair_i, s.pair_j = new_i, new_j
-        s.displacement = np.zeros((n, 2))
+        s.displacement = np.zeros((n, self.DIM))
         s.strain_at_build = s.strain
         self.max_displacement = 0.0
         self._analyze()
@@ -337,8 +428,10 @@ class Simulation:
     def _analyze(self) -> None:
         s = self.state
         n = s.radii.shape[0]
-        self.indptr, self.indices, self.pair_slot, self.diag_slot = build_pattern(s.pair_i, s.pair_j, n)
-        self.solver.analyze(self.indptr, self.indices, 3 * n)
+        self.indptr, self.indices, self.pair_slot, self.diag_slot = build_pattern(
+            s.pair_i, s.pair_j, n, self.DOF
+        )
+        self.solver.analyze(self.indptr, self.indices, self.DOF * n)
 
     def _list_is_stale(self) -> bool:
         # two particles approach by at most twice the largest non-affine displacement plus the affine
@@ -362,30 +455,8 @@ class Simulation:
         t1 = clock()
         timings["neighbours"] += t1 - t0
         radii = s.radii
-        lp = linear_problem(
-            s.positions,
-            radii,
-            s.pair_i,
-            s.pair_j,
-            s.lx,
-            s.ly,
-            s.le_offset,
-            s.stretch,
-            s.contact_state,
-            p.kn,
-            p.kt,
-            p.mu,
-            p.critical_load,
-            p.lub_max_gap,
-            p.delta,
-            s.dt_assumed if p.integrator == "implicit" else 0.0,
-            self.indptr,
-            self.pair_slot,
-            self.diag_slot,
-            self.indices.shape[0],
-        )
-        nvec, r, xi, dy, in_contact = lp.nvec, lp.r, lp.xi, lp.dy, lp.in_contact
-        # (3N, 2) with contiguous columns: both right-hand sides solved in one pass over the factor
+        lp = self.linear_problem()
+        # (N DOF, 2) with contiguous columns: both right-hand sides solved in one pass over the factor
         rhs = lp.rhs.T
         t2 = clock()
         timings["assembly"] += t2 - t1
@@ -402,27 +473,23 @@ class Simulation:
         timings["solve"] += t4 - t3
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
-        geometry = (radii, s.pair_i, s.pair_j, nvec, r, dy, lp.coeff, lp.lubricated, in_contact)
-        lub0, dash0, lub1, dash1 = pair_stress_sums(
-            vel_const, vel_rate, *geometry, lp.k_normal, lp.k_tangential, record
-        )
-        spring = spring_stress(s.pair_i, nvec, r, lp.f_on_i, s.contact_state, record)
+        lub0, dash0, lub1, dash1, spring = self.stress_sums(vel_const, vel_rate, lp, record)
         f = self.stress_factor
-        solvent_unit = np.array([0.0, 1.0, 0.0])  # 2 eta0 E at unit rate, in sigma0
-        s0_xy = f * (lub0[1] + dash0[1] + spring[1])
-        s1_xy = f * (lub1[1] + dash1[1]) + 1.0
         if p.control == "stress":
+            s0_xy = f * (lub0[1] + dash0[1] + spring[1])
+            s1_xy = f * (lub1[1] + dash1[1]) + 1.0
             shear_rate = (p.stress - s0_xy) / s1_xy
         else:  # rate control: the rate is imposed, the stress S_0 + rate * S_1 is measured
             shear_rate = p.shear_rate
         vel = vel_const + shear_rate * vel_rate
+        self.velocity = vel
         t5 = clock()
         timings["stress"] += t5 - t4
 
         # adaptive step: no particle, pair separation, contact point or strain increment may move more
         # than disp_max (physics.md §3.4; LF_DEM also limits the normal approach speed of pairs)
-        interaction_speed = contacts.max_interaction_speed(
-            vel, radii, s.pair_i, s.pair_j, nvec, dy, lp.active, s.contact_state, shear_rate
+        interaction_speed = self.max_interaction_speed(
+            vel, radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, lp.active, s.contact_state, shear_rate
         )
         if p.lagged_step_control:
             # LF_DEM (commit 00fa7cc) updates the contact sliding speeds only after the move, so its dt
@@ -432,7 +499,7 @@ class Simulation:
             s.previous_interaction_speed = interaction_speed
             if lagged >= 0.0:
                 interaction_speed = lagged
-        vmax = max(_max_translation_speed(vel), interaction_speed, abs(shear_rate))
+        vmax = max(max_translation_speed(vel, self.DIM, self.DOF), interaction_speed, abs(shear_rate))
         dt = p.disp_max / vmax if vmax > 0.0 else p.dt_max
         dt = min(dt, p.dt_max)
         if p.integrator == "implicit":
@@ -446,6 +513,7 @@ class Simulation:
             n_frictional=lp.n_frictional,
         )
         if record:
+            xi = lp.xi
             if xi.shape[0]:  # monitoring only: computed where it is recorded
                 result.max_overlap = float(max(0.0, -(xi * 0.5 * (radii[s.pair_i] + radii[s.pair_j])).min()))
                 result.max_stretch = float(np.sqrt((s.stretch**2).sum(axis=1)).max())
@@ -457,30 +525,60 @@ class Simulation:
             )
             result.stress_lubrication = f * (lub0 + shear_rate * lub1)
             result.stress_contact = f * (spring + dash0 + shear_rate * dash1)
-            result.stress_solvent = shear_rate * solvent_unit
+            result.stress_solvent = shear_rate * self.SOLVENT_UNIT
 
-        self.max_displacement, s.le_offset = _advance(
-            s.positions,
-            s.displacement,
-            vel,
-            radii,
-            s.pair_i,
-            s.pair_j,
-            nvec,
-            dy,
-            s.contact_state,
-            s.stretch,
-            shear_rate,
-            dt,
-            s.lx,
-            s.ly,
-            s.le_offset,
-        )
+        self.advance(vel, lp, shear_rate, dt)
         s.time += dt
         s.strain += shear_rate * dt
         s.steps += 1
         timings["update"] += clock() - t5
         return result
+
+
+class Simulation(SimulationBase):
+    """A 2D LF-DEM run of one state point, under stress (default) or rate control (``params.control``).
+
+    >>> sim = Simulation(SimParams(n_particles=100, phi=0.7, stress=1.0))
+    >>> result = sim.step(record=True)
+    """
+
+    DIM = 2
+    DOF = 3  # U_x, U_y, w_z
+    SOLVENT_UNIT = np.array([0.0, 1.0, 0.0])  # (xx, xy, yy)
+    neighbour_pairs = staticmethod(neighbour_pairs)
+    max_interaction_speed = staticmethod(contacts.max_interaction_speed)
+    advance_kernel = staticmethod(_advance)
+
+    def edges(self) -> tuple[float, float]:
+        return self.state.lx, self.state.ly
+
+    @staticmethod
+    def new_state(params: SimParams) -> SimState:
+        pos, radii, box = initial_configuration(params)
+        return SimState(positions=pos, radii=radii, lx=box, ly=box)
+
+    @staticmethod
+    def one_body_drag(radii: np.ndarray) -> np.ndarray:
+        # translation a, rotation 4 a^3 / 3 [6 pi eta0]
+        return np.stack([radii, radii, 4.0 * radii**3 / 3.0], axis=1).ravel()
+
+    def linear_problem(self) -> LinearProblem:
+        s, p = self.state, self.params
+        return linear_problem(
+            s.positions, s.radii, s.pair_i, s.pair_j, s.lx, s.ly, s.le_offset, s.stretch, s.contact_state,
+            p.kn, p.kt, p.mu, p.critical_load, p.lub_max_gap, p.delta,
+            s.dt_assumed if p.integrator == "implicit" else 0.0,
+            self.indptr, self.pair_slot, self.diag_slot, self.indices.shape[0],
+        )  # fmt: skip
+
+    def stress_sums(self, vel_const, vel_rate, lp: LinearProblem, record: bool) -> tuple:
+        s = self.state
+        lub0, dash0, lub1, dash1 = pair_stress_sums(
+            vel_const, vel_rate, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.r, lp.dy, lp.coeff, lp.lubricated,
+            lp.in_contact, lp.k_normal, lp.k_tangential, record,
+        )  # fmt: skip
+        spring = spring_stress(s.pair_i, lp.nvec, lp.r, lp.f_on_i, s.contact_state, record)
+        return lub0, dash0, lub1, dash1, spring
 
 
 def viscosity(result: StepResult) -> float:

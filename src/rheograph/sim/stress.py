@@ -6,6 +6,8 @@ converts to sigma0 = F_CL / (6 pi a^2) (see ``stress_unit_factor``).  Tensors ar
 (xx, xy, yy) since sigma_zz = 0 in the monolayer and the tensor is symmetric.
 """
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -164,6 +166,7 @@ def spring_stress(pair_i, nvec, r, f_on_i, state, full):
     return out
 
 
-def stress_unit_factor(lx: float, ly: float) -> float:
-    """Factor converting a stresslet sum (F_CL a per unit thickness) to stress in sigma0 = F_CL/(6 pi a^2)."""
-    return 6.0 * np.pi / (lx * ly)
+def stress_unit_factor(*edges: float) -> float:
+    """Factor converting a stresslet sum (F_CL a, per unit thickness in 2D) to stress in
+    sigma0 = F_CL/(6 pi a^2): 6 pi / the box's area or volume, of ``edges`` (lx, ly[, lz]) [a]."""
+    return 6.0 * np.pi / math.prod(edges)

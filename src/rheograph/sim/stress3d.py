@@ -2,7 +2,7 @@
 2 eta0 E is added by the integrator.
 
 Stresslet sums are in F_CL * a; dividing by the box volume Lx Ly Lz and multiplying by 6 pi converts to
-sigma0 = F_CL / (6 pi a^2) (``stress_unit_factor``).  Symmetric tensors are stored as their upper
+sigma0 = F_CL / (6 pi a^2) (``stress.stress_unit_factor``).  Symmetric tensors are stored as their upper
 triangle (xx, xy, xz, yy, yz, zz); ``COMPONENTS`` names them.  As in 2D the lubrication stresslets are not
 made traceless (they contribute to the particle pressure), and the rotation term uses Y^M where Jeffrey &
 Onishi have Y^H, as LF_DEM does (identical in pair sum for equal spheres only).
@@ -144,11 +144,6 @@ def spring_stress(pair_i, nvec, r, f_on_i, state):
             b = _COL[k]
             out[k] += 0.5 * r[p] * (nvec[p, a] * f_on_i[p, b] + nvec[p, b] * f_on_i[p, a])
     return out
-
-
-def stress_unit_factor(lx: float, ly: float, lz: float) -> float:
-    """Factor converting a stresslet sum (F_CL a) to stress in sigma0 = F_CL / (6 pi a^2)."""
-    return 6.0 * np.pi / (lx * ly * lz)
 
 
 def particle_pressure(stress: np.ndarray) -> float:
