@@ -11,7 +11,7 @@ export OMP_WAIT_POLICY ?= PASSIVE
 SYSTEM_PACKAGES := libsuitesparse-dev libopenblas0-serial
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: install system-packages demo test test-slow lint docs cards bench bench-render bench-quick
+.PHONY: install system-packages demo test test-slow lint docs cards bench bench-render bench-quick clean-numba
 
 install: $(VENV)/.installed
 
@@ -105,3 +105,8 @@ cards: install
 	    --command "python simulate.py -m campaign=large_n_jamming hydra.launcher.n_jobs=1   # phi 0.80, N = 8000" \
 	    --command "python simulate.py -m campaign=large_n_jamming hydra.launcher.n_jobs=1 sim.stress=20 sim.seed=2" \
 	    --command "python simulate.py -m campaign=large_n_jamming hydra.launcher.n_jobs=1 sim.n_particles=20000 sim.stress=20"
+
+# numba's compiled kernels (beside the sources): its cache misses a change in a called kernel's file, so
+# clear it after editing or pulling the simulator's sources in an editable install (docs/faults.md)
+clean-numba:
+	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
