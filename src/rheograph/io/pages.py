@@ -70,7 +70,7 @@ def write_record(path: Path, record: dict) -> None:
     them) to ``path``, whole or not at all."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomically(path, json.dumps(record, indent=1, allow_nan=True) + "\n")
+    _write_atomically(path, json.dumps(record, indent=1, allow_nan=True, ensure_ascii=False) + "\n")
 
 
 def read_record(path: Path, what: str) -> dict:
@@ -84,5 +84,5 @@ def read_record(path: Path, what: str) -> dict:
 
 def _write_atomically(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
+    tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
