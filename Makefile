@@ -78,13 +78,16 @@ lint: install
 	$(VENV)/bin/ruff format --check src tests bench *.py
 
 # the dataset cards of the committed sets (tables and figures from the trajectory files; each quotes the
-# simulate commands that regenerate its runs)
+# simulate commands that regenerate its runs), and the records of the figures' numbers (python -m bench.render)
 cards: install
-	$(PY) -m rheograph.analysis.dataset_card data/paper --out docs
+	$(PY) -m rheograph.analysis.dataset_card data/paper --out docs \
+	    --record docs/results/bench/figures/dataset_paper.json
 	$(PY) -m rheograph.analysis.dataset_card data/flow_curves_3d --out docs/datasets/flow_curves_3d \
+	    --record docs/results/bench/figures/dataset_flow_curves_3d.json \
 	    --title "Dataset card: the 3D flow-curve set (in progress)" \
 	    --command "python simulate.py -m campaign=flow_curves_3d"
 	$(PY) -m rheograph.analysis.dataset_card data/jamming --out docs/datasets/jamming \
+	    --record docs/results/bench/figures/dataset_jamming.json \
 	    --title "Dataset card: runs near jamming" \
 	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1   # mu = 0" \
 	    --command "python simulate.py -m campaign=jamming_frictionless hydra.launcher.n_jobs=1 sim.n_particles=2000 sim.strain=3 sim.phi=0.82,0.83,0.835 sim.seed=1,2" \
@@ -98,6 +101,7 @@ cards: install
 	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.78,0.79 sim.seed=1,2" \
 	    --command "python simulate.py -m campaign=jamming_frictional hydra.launcher.n_jobs=1 sim.stress=200 sim.n_particles=2000 sim.phi=0.795 sim.seed=1"
 	$(PY) -m rheograph.analysis.dataset_card data/large_n --out docs/datasets/large_n \
+	    --record docs/results/bench/figures/dataset_large_n.json \
 	    --title "Dataset card: large systems" \
 	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1 sim.n_particles=400,2000   # phi 0.76" \
 	    --command "python simulate.py -m campaign=large_n hydra.launcher.n_jobs=1   # N = 8000" \

@@ -5,13 +5,17 @@ and the seed paper's Fig. 2 (targets of every snapshot against sigma and shear r
     python -m rheograph.analysis.dataset_card data/paper --out docs --min-strain 1.0
 
 writes ``dataset.md`` (tables) and ``figures/dataset_fig2.png``, ``figures/dataset_fig3.png`` into --out,
-and ``index.json`` (``rheograph.runs.sweep_index``) into the data directory.
+and ``index.json`` (``rheograph.runs.sweep_index``) into the data directory; with ``--record FILE`` also
+the numbers the two figures plot (``fig2``: :func:`fig2_data`, ``fig3``: :func:`fig3_data`) as JSON, from
+which :func:`draw_fig2` and :func:`draw_fig3` redraw them alone.
 """
 
 from __future__ import annotations
 
 import argparse
 import re
+import shlex
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -25,9 +29,10 @@ from rheograph.analysis.steady import (
     transient_strain,
 )
 from rheograph.errors import InputError, one_line_errors
-from rheograph.io.figures import save_png
+from rheograph.io.figures import save_png, significant
 from rheograph.io.hdf5 import jammed_snapshots, read_run_info, read_snapshot_table, read_timeseries
 from rheograph.io.index import USABLE, build_index, write_index
+from rheograph.io.pages import write_record
 from rheograph.sim.params import SimParams
 
 TARGETS = ("viscosity", "pressure", "z_mu")
@@ -440,22 +445,19 @@ def _flow_curve(points, n, phi, mu, key):
     return s[ok], v[ok]
 
 
-def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
-    """Seed paper Fig. 2, one row per N: flowing snapshots as dots, arrested packings (jammed snapshots:
-    Π and Z_μ only) as crosses, the steady flow-curve means as lines."""
-    import matplotlib
+FIG2_DPI, FIG3_DPI = 100, 90  # dots per inch of dataset_fig2.png and dataset_fig3.png
+FIG3_BINS = 30  # bins per axis of the Fig. 3 densities
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    ns = sorted({r["n"] for r in records})
+def fig2_data(records: list[dict], points: list[dict]) -> dict:
+    """The numbers of :func:`draw_fig2`: per N (``sizes``) and (φ, μ) series, the flowing snapshots'
+    σ/σ0, η_r, γ̇/γ̇0, Π/σ0 and Z_μ (one entry per snapshot), the arrested snapshots' σ/σ0, Π/σ0 and Z_μ,
+    and the steady flow-curve means (σ/σ0 and value per target, NaN-free)."""
+    sizes = sorted({r["n"] for r in records})
     series = sorted({(r["phi"], r["mu"]) for r in records})
-    colours = dict(zip(series, plt.cm.viridis(np.linspace(0, 0.9, len(series)))))
-    fig, grid = plt.subplots(len(ns), 4, figsize=(17, 4.0 * len(ns)), squeeze=False)
-    rng = np.random.default_rng(0)
-    for axes, n in zip(grid, ns):
+    panels = []
+    for n in sizes:
         for phi, mu in series:
-            colour = colours[(phi, mu)]
             runs = [
                 r
                 for r in records
@@ -464,27 +466,67 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
             if not runs:
                 continue
             flowing = [r for r in runs if r["n_flowing_snapshots"]]
-            if flowing:
-                s = np.concatenate([np.full(r["n_flowing_snapshots"], r["stress"]) for r in flowing])
-                s = s * np.exp(rng.normal(0, 0.03, s.size))  # jitter: points of one stress side by side
-                keys = (*TARGETS, "shear_rate")
-                snap = {k: np.concatenate([r["snapshots"][k] for r in flowing]) for k in keys}
+            arrested = [r for r in runs if r["n_jammed_snapshots"]]
+            panels.append(
+                {
+                    "n": n,
+                    "phi": phi,
+                    "mu": mu,
+                    "flowing": _snapshots(
+                        flowing, "n_flowing_snapshots", "snapshots", (*TARGETS, "shear_rate")
+                    ),
+                    "arrested": _snapshots(arrested, "n_jammed_snapshots", "arrested", ("pressure", "z_mu")),
+                    "means": {
+                        key: [significant(v, 6) for v in _flow_curve(points, n, phi, mu, key)]
+                        for key in TARGETS
+                    },
+                }
+            )
+    return {"sizes": sizes, "series": [list(s) for s in series], "panels": panels}
+
+
+def _snapshots(runs: list[dict], count: str, table: str, keys) -> dict:
+    """σ/σ0 of every snapshot of ``runs`` (``count`` of each) and its ``keys`` of ``table``."""
+    out = {"stress": significant(np.concatenate([np.full(r[count], r["stress"]) for r in runs] or [[]]))}
+    for key in keys:
+        out[key] = significant(np.concatenate([r[table][key] for r in runs] or [[]]))
+    return out
+
+
+def draw_fig2(data: dict):
+    """Seed paper Fig. 2 from :func:`fig2_data`, one row per N: flowing snapshots as dots, arrested
+    packings (jammed snapshots: Π and Z_μ only) as crosses, the steady flow-curve means as lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ns, series = data["sizes"], [tuple(s) for s in data["series"]]
+    colours = dict(zip(series, plt.cm.viridis(np.linspace(0, 0.9, len(series)))))
+    fig, grid = plt.subplots(len(ns), 4, figsize=(17, 4.0 * len(ns)), squeeze=False)
+    rng = np.random.default_rng(0)
+    for axes, n in zip(grid, ns):
+        for panel in (p for p in data["panels"] if p["n"] == n):
+            phi, mu = panel["phi"], panel["mu"]
+            colour = colours[(phi, mu)]
+            snap = {k: np.array(v) for k, v in panel["flowing"].items()}
+            if snap["stress"].size:
+                s = snap["stress"] * np.exp(rng.normal(0, 0.03, snap["stress"].size))  # side by side
                 kw = dict(s=4, alpha=0.35, color=colour)
                 axes[0].scatter(s, snap["viscosity"], label=f"φ = {series_label(phi, mu)}", **kw)
                 axes[1].scatter(snap["shear_rate"], snap["viscosity"], **kw)
                 axes[2].scatter(s, snap["pressure"], **kw)
                 axes[3].scatter(s, snap["z_mu"], **kw)
-            arrested = [r for r in runs if r["n_jammed_snapshots"]]
-            if arrested:
-                s = np.concatenate([np.full(r["n_jammed_snapshots"], r["stress"]) for r in arrested])
+            arrested = panel["arrested"]
+            if arrested["stress"]:
                 kw = dict(s=30, marker="x", color=colour, linewidths=1.2)
-                axes[2].scatter(s, np.concatenate([r["arrested"]["pressure"] for r in arrested]), **kw)
-                axes[3].scatter(s, np.concatenate([r["arrested"]["z_mu"] for r in arrested]), **kw)
-            stress, eta = _flow_curve(points, n, phi, mu, "viscosity")
+                axes[2].scatter(arrested["stress"], arrested["pressure"], **kw)
+                axes[3].scatter(arrested["stress"], arrested["z_mu"], **kw)
+            stress, eta = (np.array(v) for v in panel["means"]["viscosity"])
             axes[0].plot(stress, eta, "-", color=colour, lw=1.5)
             axes[1].plot(stress / eta, eta, "-", color=colour, lw=1.5)
             for ax, key in ((axes[2], "pressure"), (axes[3], "z_mu")):
-                ax.plot(*_flow_curve(points, n, phi, mu, key), "-", color=colour, lw=1.5)
+                ax.plot(*panel["means"][key], "-", color=colour, lw=1.5)
         labels = [("σ/σ0", "η_r"), ("γ̇/γ̇0", "η_r"), ("σ/σ0", "Π/σ0"), ("σ/σ0", "Z_μ")]
         for ax, (xl, yl) in zip(axes, labels):
             ax.set_xlabel(xl)
@@ -500,8 +542,7 @@ def plot_fig2(records: list[dict], points: list[dict], path: Path) -> None:
         axes[3].set_title("×: arrested (jammed) packings; lines: steady means", fontsize=8)
         axes[0].legend(fontsize=8, markerscale=3)
     fig.tight_layout()
-    save_png(fig, path, dpi=100)
-    plt.close(fig)
+    return fig
 
 
 def _has_points(ax) -> bool:
@@ -511,44 +552,70 @@ def _has_points(ax) -> bool:
     )
 
 
-def plot_fig3(records: list[dict], path: Path) -> None:
-    """Seed paper Fig. 3: density of log η_r and log Π against Z_μ per φ (flowing snapshots, all N),
-    with the marginal of Z_μ above and of η_r or Π beside each panel."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    series = sorted({(r["phi"], r["mu"]) for r in records})
-    fig = plt.figure(figsize=(4.4 * len(series), 7.4))
-    ratios = dict(height_ratios=[1, 3, 1, 3], width_ratios=[3, 1] * len(series))
-    grid = fig.add_gridspec(4, 2 * len(series), hspace=0.5, wspace=0.35, **ratios)
-    for col, (phi, mu) in enumerate(series):
+def fig3_data(records: list[dict]) -> dict:
+    """The numbers of :func:`draw_fig3`: per (φ, μ) series (flowing snapshots of finished runs, all N),
+    the counts of (Z_μ, log10 η_r) and of (Z_μ, log10 Π/σ0) in ``FIG3_BINS`` x ``FIG3_BINS`` bins
+    (``counts[i][j]``: Z_μ bin i, log bin j) and the bin edges (``FIG3_BINS`` + 1 each); null for a
+    series without flowing snapshots."""
+    out = []
+    for phi, mu in sorted({(r["phi"], r["mu"]) for r in records}):
         runs = [
             r
             for r in records
             if r["phi"] == phi and r["mu"] == mu and r["n_flowing_snapshots"] and r["status"] in USABLE
         ]
+        densities = {"viscosity": None, "pressure": None}  # a series that never flowed: an empty column
         if not runs:
+            out.append({"phi": phi, "mu": mu, **densities})
             continue
         z = np.concatenate([r["snapshots"]["z_mu"] for r in runs])
-        for row, key in ((1, "viscosity"), (3, "pressure")):
+        for key in ("viscosity", "pressure"):
             v = np.concatenate([r["snapshots"][key] for r in runs])
             ok = v > 0
-            logv = np.log10(v[ok])
+            counts, z_edges, log_edges = np.histogram2d(z[ok], np.log10(v[ok]), bins=FIG3_BINS)
+            densities[key] = {
+                "z_mu_edges": z_edges.tolist(),
+                "log_edges": log_edges.tolist(),
+                "counts": counts.astype(int).tolist(),
+            }
+        out.append({"phi": phi, "mu": mu, **densities})
+    return {"series": out}
+
+
+def draw_fig3(data: dict):
+    """Seed paper Fig. 3 from :func:`fig3_data`: density of log η_r and log Π against Z_μ per φ, with the
+    marginal of Z_μ above and of η_r or Π beside each panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = data["series"]
+    fig = plt.figure(figsize=(4.4 * len(series), 7.4))
+    ratios = dict(height_ratios=[1, 3, 1, 3], width_ratios=[3, 1] * len(series))
+    grid = fig.add_gridspec(4, 2 * len(series), hspace=0.5, wspace=0.35, **ratios)
+    for col, entry in enumerate(series):
+        for row, key in ((1, "viscosity"), (3, "pressure")):
+            density = entry[key]
+            if density is None:
+                continue
+            x, y = np.array(density["z_mu_edges"]), np.array(density["log_edges"])
+            counts = np.array(density["counts"], dtype=np.float64)
             main = fig.add_subplot(grid[row, 2 * col])
             top = fig.add_subplot(grid[row - 1, 2 * col], sharex=main)
             side = fig.add_subplot(grid[row, 2 * col + 1], sharey=main)
-            main.hist2d(z[ok], logv, bins=30, cmap="magma_r")
-            top.hist(z[ok], bins=30, color="grey")
-            side.hist(logv, bins=30, color="grey", orientation="horizontal")
-            top.set_title(f"φ = {series_label(phi, mu)}" if row == 1 else "", fontsize=9)
+            main.pcolormesh(x, y, counts.T, cmap="magma_r")
+            main.set_xlim(x[0], x[-1])
+            main.set_ylim(y[0], y[-1])
+            # the marginals are the densities' sums: the histograms of Z_μ and of the log on those bins
+            top.hist(x[:-1], bins=x, weights=counts.sum(axis=1), color="grey")
+            side.hist(y[:-1], bins=y, weights=counts.sum(axis=0), color="grey", orientation="horizontal")
+            top.set_title(f"φ = {series_label(entry['phi'], entry['mu'])}" if row == 1 else "", fontsize=9)
             top.tick_params(labelbottom=False)
             side.tick_params(labelleft=False)
             main.set_xlabel("Z_μ")
             main.set_ylabel("log10 η_r" if key == "viscosity" else "log10 Π/σ0")
-    save_png(fig, path, dpi=90)
-    plt.close(fig)
+    return fig
 
 
 def main(argv=None) -> None:
@@ -563,6 +630,7 @@ def main(argv=None) -> None:
         "(default: the paper-scale set's)",
     )
     ap.add_argument("--title", default="Dataset card", help="the card's heading")
+    ap.add_argument("--record", help="JSON file to keep the figures' numbers in (what redraws them)")
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
     if not data.is_dir():
@@ -581,8 +649,14 @@ def main(argv=None) -> None:
     points = state_points([data])
     commands = "\n".join(args.command or PAPER_SET_COMMANDS)
     (out / "dataset.md").write_text(card_markdown(records, points, commands, args.min_strain, args.title))
-    plot_fig2(records, points, out / "figures" / "dataset_fig2.png")
-    plot_fig3(records, out / "figures" / "dataset_fig3.png")
+    figures = {"fig2": fig2_data(records, points), "fig3": fig3_data(records)}
+    save_png(draw_fig2(figures["fig2"]), out / "figures" / "dataset_fig2.png", FIG2_DPI, figures["fig2"])
+    save_png(draw_fig3(figures["fig3"]), out / "figures" / "dataset_fig3.png", FIG3_DPI, figures["fig3"])
+    if args.record:
+        command = "python -m rheograph.analysis.dataset_card " + shlex.join(
+            argv if argv is not None else sys.argv[1:]
+        )
+        write_record(Path(args.record), {"command": command, **figures})
     print(f"{len(records)} runs -> {out / 'dataset.md'}, {data / 'index.json'}")
 
 

@@ -4,11 +4,13 @@ LF_DEM reference data.
     python -m rheograph.analysis.flow_curves data/flow_curves --out docs \
         --reference data/lfdem_reference/lfdem_phi0.76
 
-writes ``flow_curves.png`` and ``flow_curves.md`` into --out.  Seeds of one state point are pooled: the
-value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds)) and the propagated
-block standard errors.  Runs stopped early (wall-clock limit) are included and flagged by their status and
-reached strain; shear-jammed runs are listed as such: their viscosity is never averaged, their pressure
-and coordination (finite: the loaded static packing) are, where no seed of the state point flows.
+writes ``flow_curves.png`` and ``flow_curves.md`` into --out, and with ``--record FILE`` the numbers the
+figure plots (:func:`figure_data`) as JSON, from which :func:`draw` redraws it alone.  Seeds of one state
+point are pooled: the value is their mean and the error the larger of (spread of seeds / sqrt(n_seeds))
+and the propagated block standard errors.  Runs stopped early (wall-clock limit) are included and flagged
+by their status and reached strain; shear-jammed runs are listed as such: their viscosity is never
+averaged, their pressure and coordination (finite: the loaded static packing) are, where no seed of the
+state point flows.
 2D and 3D runs are never pooled: a 3D state point is its own row, its N shown as e.g. ``500 (3D)`` (and
 the imposed rate of a rate-controlled run, ``500 (3D, rate 0.1)``, whose σ/σ0 in the table is the
 measured steady stress η_r γ̇); Π_2D/σ, the 2D convention's pressure, is left empty for a 3D run.
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -29,6 +32,7 @@ from rheograph.io.configurations import DAMAGED_FILE_ERRORS
 from rheograph.io.figures import save_png
 from rheograph.io.hdf5 import is_trajectory, read_run_info, read_timeseries
 from rheograph.io.lfdem import read_lfdem_data
+from rheograph.io.pages import write_record
 from rheograph.sim.params import scheme_name
 
 KEYS = ("viscosity", "pressure", "z_mu", "z")
@@ -245,7 +249,26 @@ def markdown_table(points, reference=()) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot(points, reference, out_png: Path) -> None:
+# what the figure plots of a state point (its series, its position and its three means with their errors)
+FIGURE_KEYS = ("phi", "disp_max", "integrator", "dim", "imposed_rate", "radii", "stress", "jammed")
+PLOTTED = ("viscosity", "pressure", "z_mu")
+DPI = 120  # dots per inch of flow_curves.png
+
+
+def figure_data(points, reference=()) -> dict:
+    """The numbers :func:`draw` plots: ``points`` (state points, :func:`state_points`) and ``reference``
+    (LF_DEM's, :func:`reference_points`) reduced to their series keys, σ/σ0 and the means ± standard
+    errors of η_r, Π/σ0 and Z_μ (JSON-serialisable: the figure's record)."""
+    values = [k for key in PLOTTED for k in (key, key + "_se")]
+    return {
+        "points": [{**{k: p.get(k, "") for k in FIGURE_KEYS}, **{k: p[k] for k in values}} for p in points],
+        "reference": [{k: r[k] for k in ("phi", "disp_max", "stress", *values)} for r in reference],
+    }
+
+
+def draw(data: dict):
+    """The flow-curve figure of :func:`figure_data`'s numbers: η_r, Π and Z_μ against σ/σ0, one line per
+    (φ, disp_max, integrator, dimension, imposed rate, radii), LF_DEM's points hollow triangles."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -253,8 +276,8 @@ def plot(points, reference, out_png: Path) -> None:
 
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.9))
     series = defaultdict(list)
-    for p in points:
-        key = (p["phi"], p["disp_max"], p["integrator"], p["dim"], p["imposed_rate"], p.get("radii", ""))
+    for p in data["points"]:
+        key = (p["phi"], p["disp_max"], p["integrator"], p["dim"], p["imposed_rate"], p["radii"])
         series[key].append(p)
     for (phi, disp, integrator, dim, rate, radii), pts in sorted(series.items()):
         pts = sorted(pts, key=lambda q: q["stress"])
@@ -265,17 +288,18 @@ def plot(points, reference, out_png: Path) -> None:
         label += f", {radii}" if radii else ""
         if all(q["jammed"] for q in pts):
             label += ", shear-jammed"
-        for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
+        for ax, key in zip(axes, PLOTTED):
             y = np.array([q[key] for q in pts])
             e = np.array([q[key + "_se"] for q in pts])
             ax.errorbar(s, y, yerr=e, marker="o", capsize=3, label=label)
         jam = [q["stress"] for q in pts if q["jammed"]]
         if jam:
             axes[0].plot(jam, [axes[0].get_ylim()[1]] * len(jam), "kx", label=f"φ={phi:g} shear-jammed")
+    reference = data["reference"]
     for r_disp in sorted({r["disp_max"] for r in reference}):
         ref = sorted((r for r in reference if r["disp_max"] == r_disp), key=lambda q: q["stress"])
         s = np.array([r["stress"] for r in ref])
-        for ax, key in zip(axes, ("viscosity", "pressure", "z_mu")):
+        for ax, key in zip(axes, PLOTTED):
             ax.errorbar(
                 s,
                 [r[key] for r in ref],
@@ -296,9 +320,7 @@ def plot(points, reference, out_png: Path) -> None:
     rows = -(-len(labels) // 3)
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
     fig.tight_layout(rect=(0, 0.032 * rows + 0.01, 1, 1))
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    save_png(fig, out_png, dpi=120)
-    plt.close(fig)
+    return fig
 
 
 def main(argv=None) -> None:
@@ -306,6 +328,7 @@ def main(argv=None) -> None:
     ap.add_argument("directories", nargs="+", help="directories searched recursively for trajectory files")
     ap.add_argument("--out", required=True, help="output directory for flow_curves.png / flow_curves.md")
     ap.add_argument("--reference", help="directory of LF_DEM data_*.dat files to compare with")
+    ap.add_argument("--record", help="JSON file to keep the figure's numbers in (what redraws it)")
     args = ap.parse_args(argv)
     reference = reference_points(args.reference) if args.reference else []
     points = state_points(args.directories)
@@ -313,7 +336,13 @@ def main(argv=None) -> None:
         raise InputError(f"no rheograph trajectory files under {args.directories}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    plot(points, reference, out / "flow_curves.png")
+    data = figure_data(points, reference)
+    save_png(draw(data), out / "flow_curves.png", DPI, drawn_from=data)
+    if args.record:
+        command = "python -m rheograph.analysis.flow_curves " + " ".join(
+            argv if argv is not None else sys.argv[1:]
+        )
+        write_record(Path(args.record), {"command": command, "figure": data})
     table = markdown_table(points, reference)
     (out / "flow_curves.md").write_text(table)
     print(table)

@@ -414,70 +414,94 @@ def docs_page(path: Path) -> str:
     return "/".join(parts[len(parts) - parts[::-1].index("docs") :])
 
 
-def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
-    """(phi, sigma/sigma0) plane: flowing and jammed state points per N, the Wyart–Cates jamming line
-    phi_m(f(sigma)) with f the mean measured Z_mu / Z per stress, the branch divergences and the
-    arrest-probability intervals."""
-    import matplotlib
+DPI = 130  # dots per inch of the phase diagram
+BRANCHES = ("phi_J^0", "phi_J^mu")
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    sizes = sorted({r["n"] for r in runs})
-    fig, axes = plt.subplots(1, len(sizes), figsize=(4.2 * len(sizes), 3.8), squeeze=False, sharey=True)
-    for ax, n in zip(axes[0], sizes):
+def phase_diagram_data(runs: list[dict], rows: list[dict]) -> dict:
+    """The numbers of :func:`draw_phase_diagram`, per N (``sizes``): the (φ, σ/σ0) of the frictional
+    runs that flow and of those that shear-jam; the Wyart–Cates jamming line φ_m(f) of the best-fitting
+    Wyart–Cates row (β fitted) at each flowing stress, f the mean measured Z_μ / Z there (null without
+    such a fit); per branch (``phi_J^0``, ``phi_J^mu``) the divergence's φ_J (β fitted) and the 68 %
+    interval of arrest probability 1/2 (null where not fitted)."""
+    sizes = []
+    for n in sorted({r["n"] for r in runs}):
         frictional = [r for r in runs if r["n"] == n and r["mu"] > 0]
-        for status, marker, color, label in (
-            ("completed", "o", "tab:blue", "flows"),
-            ("jammed", "x", "tab:red", "shear-jammed"),
-        ):
-            pts = [(r["phi"], r["stress"]) for r in frictional if r["status"] == status]
-            if pts:
-                p, s = np.array(pts).T
-                ax.scatter(p, s, marker=marker, color=color, s=22, label=label, alpha=0.6)
-        # the Wyart-Cates fit (beta fitted) that fits best, and the branch divergences (beta fitted)
+        states = {
+            status: [[r["phi"], r["stress"]] for r in frictional if r["status"] == status]
+            for status in ("completed", "jammed")
+        }
         candidates = [r for r in rows if r["n"] == n and "wyart_cates" in r and r["beta_ci"]]
         best = min(candidates, key=lambda r: r["rms_log"]) if candidates else None
-        fit = best["wyart_cates"] if best else None
-        if fit:
+        line = None
+        if best and best["wyart_cates"]:
+            fit = best["wyart_cates"]
             stresses = sorted({r["stress"] for r in frictional if flowing(r)})
             f = [
                 np.nanmean([r["z_mu"] / r["z"] for r in frictional if r["stress"] == s and flowing(r)])
                 for s in stresses
             ]
+            line = {
+                "phi_m": wyart_cates(np.array(f), fit["phi_j0"], fit["phi_jmu"]).tolist(),
+                "stress": stresses,
+                "prefactor_in_f": "prefactor_mu" in fit,
+            }
+        divergence, arrest = {}, {}
+        for quantity in BRANCHES:
+            mine = [r for r in rows if r["n"] == n and r["quantity"] == quantity]
+            row = next((r for r in mine if r["method"] == "divergence, beta fitted"), None)
+            divergence[quantity] = row["phi_j"] if row else None
+            crossing = next((r for r in mine if r["method"].startswith("arrest probability")), None)
+            arrest[quantity] = list(crossing["phi_j_ci"]) if crossing else None
+        sizes.append(
+            {
+                "n": n,
+                "flows": states["completed"],
+                "jammed": states["jammed"],
+                "wyart_cates": line,
+                "divergence": divergence,
+                "arrest": arrest,
+            }
+        )
+    return {"sizes": sizes}
+
+
+def draw_phase_diagram(data: dict):
+    """(φ, σ/σ0) plane from :func:`phase_diagram_data`: flowing and jammed state points per N, the
+    Wyart–Cates jamming line, the branch divergences and the arrest-probability intervals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = data["sizes"]
+    fig, axes = plt.subplots(1, len(sizes), figsize=(4.2 * len(sizes), 3.8), squeeze=False, sharey=True)
+    for ax, size in zip(axes[0], sizes):
+        for key, marker, color, label in (
+            ("flows", "o", "tab:blue", "flows"),
+            ("jammed", "x", "tab:red", "shear-jammed"),
+        ):
+            if size[key]:
+                p, s = np.array(size[key]).T
+                ax.scatter(p, s, marker=marker, color=color, s=22, label=label, alpha=0.6)
+        line = size["wyart_cates"]
+        if line:
             ax.plot(
-                wyart_cates(np.array(f), fit["phi_j0"], fit["phi_jmu"]),
-                stresses,
+                line["phi_m"],
+                line["stress"],
                 "k-",
                 label=r"$\phi_m(f)$, Wyart–Cates"
-                + (r" ($\log A$ linear in $f$)" if "prefactor_mu" in fit else r" ($\beta$ fitted)"),
+                + (r" ($\log A$ linear in $f$)" if line["prefactor_in_f"] else r" ($\beta$ fitted)"),
             )
-        for quantity, style in (("phi_J^0", ":"), ("phi_J^mu", "--")):
-            row = next(
-                (
-                    r
-                    for r in rows
-                    if r["n"] == n and r["quantity"] == quantity and r["method"] == "divergence, beta fitted"
-                ),
-                None,
-            )
-            if row:
-                symbol = r"$\phi_J^0$" if quantity == "phi_J^0" else r"$\phi_J^\mu$"
-                ax.axvline(row["phi_j"], color="0.4", ls=style, label=f"{symbol} (divergence)")
-            crossing = next(
-                (
-                    r
-                    for r in rows
-                    if r["n"] == n
-                    and r["quantity"] == quantity
-                    and r["method"].startswith("arrest probability")
-                ),
-                None,
-            )
-            if crossing:
-                symbol = r"$\phi_J^0$" if quantity == "phi_J^0" else r"$\phi_J^\mu$"
+        for quantity, style in zip(BRANCHES, (":", "--")):
+            symbol = r"$\phi_J^0$" if quantity == "phi_J^0" else r"$\phi_J^\mu$"
+            if size["divergence"][quantity] is not None:
+                ax.axvline(
+                    size["divergence"][quantity], color="0.4", ls=style, label=f"{symbol} (divergence)"
+                )
+            if size["arrest"][quantity] is not None:
                 ax.axvspan(
-                    *crossing["phi_j_ci"],
+                    *size["arrest"][quantity],
                     color="tab:red" if quantity == "phi_J^mu" else "tab:purple",
                     alpha=0.2,
                     label=f"{symbol}: arrest probability 1/2 (68 %)",
@@ -485,13 +509,12 @@ def plot_phase_diagram(runs: list[dict], rows: list[dict], path: Path) -> None:
         ax.set_xscale("linear")
         ax.set_yscale("log")
         ax.set_xlabel(r"$\phi$")
-        ax.set_title(f"N = {n}")
+        ax.set_title(f"N = {size['n']}")
     axes[0][0].set_ylabel(r"$\sigma/\sigma_0$")
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
-    save_png(fig, path, dpi=130)
-    plt.close(fig)
+    return fig
 
 
 def main(argv=None) -> None:
@@ -502,7 +525,8 @@ def main(argv=None) -> None:
     )
     ap.add_argument(
         "--record",
-        help="JSON record of the section (docs/results/bench/jamming_fits.json: what the docs build draws)",
+        help="JSON record of the section and of the phase diagram's numbers (docs/results/bench/"
+        "jamming_fits.json: what python -m bench.render draws both from)",
     )
     ap.add_argument("--figure", help="phase-diagram PNG")
     ap.add_argument("--seed", type=int, default=0, help="bootstrap seed")
@@ -526,16 +550,18 @@ def main(argv=None) -> None:
     print(text)
     if args.out:
         replace_section(Path(args.out), "jamming_fits", text)
+    figure = phase_diagram_data(runs, rows)
     if args.record:
         record = {
             "section": "jamming_fits",
             "page": docs_page(args.out),
             "command": command,
             "blocks": blocks,
+            "figure": figure,
         }
         write_record(Path(args.record), record)
     if args.figure:
-        plot_phase_diagram(runs, rows, Path(args.figure))
+        save_png(draw_phase_diagram(figure), Path(args.figure), DPI, drawn_from=figure)
 
 
 if __name__ == "__main__":
