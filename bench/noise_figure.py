@@ -8,7 +8,8 @@ positions, gap-shell inputs (φ = 0.76) and the lookup of the training mean at (
 It draws the numbers that ``bench/snapshot_noise.py`` records for each run it scores
 (docs/results/bench/snapshot_noise/<run>.json, each with the command that made it; the same numbers as
 its tables in docs/validation/position_noise.md), so it costs no prediction: rerun those commands to
-refresh them, then this.  Writes docs/figures/imaging_noise.png (``--out``).
+refresh them, then this.  Keeps the plotted numbers in docs/results/bench/figures/imaging_noise.json, from
+which it draws docs/figures/imaging_noise.png (as ``python -m bench.render`` does).
 """
 
 from __future__ import annotations
@@ -17,14 +18,14 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from bench.publishing import read_result_record
+from bench.figures import NOISE_TARGETS as TARGETS
+from bench.figures import publish_figure
+from bench.publishing import command_line, read_result_record
 from rheograph.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "docs" / "results" / "bench" / "snapshot_noise"  # bench/snapshot_noise.py's, per run
-TARGETS = (("R² log η_r", "log η_r"), ("R² log Π", "log Π"), ("R² Z_μ", "Z_μ"))
+FIGURE = "figures/imaging_noise.png"
 RELAXED = "graph network on positions relaxed by Δγ = 0.01 (every 4th)"  # the exact model, relaxed input
 # (φ, the exact model's run, the imaging model's run, further (run, row, label))
 PANELS = (
@@ -52,16 +53,6 @@ def curves(exact: str, imaging: str, extra=()) -> list[tuple[str, str, str]]:
     ]
 
 
-STYLE = {
-    "exact model": dict(color="tab:red", marker="x"),
-    "exact model, relaxed positions": dict(color="tab:orange", marker="v"),
-    "trees on descriptors + σ": dict(color="tab:green", marker="s"),
-    "gap shells, ε known": dict(color="tab:purple", marker="D"),
-    "imaging model": dict(color="tab:blue", marker="o", linewidth=2.2),
-    "lookup: mean at (φ, σ)": dict(color="black", linestyle="--", marker=""),
-}
-
-
 def run_records(records: Path, runs) -> tuple[list[float], dict]:
     """The noise levels shared by the recorded ``runs`` and their rows {(run, predictor, metric): [value
     per ε]}, from ``records``/<run>.json."""
@@ -80,55 +71,31 @@ def run_records(records: Path, runs) -> tuple[list[float], dict]:
     return eps, rows
 
 
+def figure_data(records: Path = RECORDS) -> dict:
+    """The numbers :func:`bench.figures.draw_imaging_noise` plots: per panel its φ, the noise levels ε
+    and per curve its legend label and R² per ε of each target, from the run records in ``records``."""
+    panels = []
+    for phi, exact, imaging, extra in PANELS:
+        runs = dict.fromkeys(run for run, _, _ in curves(exact, imaging, extra))
+        eps, rows = run_records(Path(records), runs)
+        lines = []
+        for run, predictor, label in curves(exact, imaging, extra):
+            missing = [m for m, _ in TARGETS if (run, predictor, m) not in rows]
+            if missing:
+                sys.exit(f"noise_figure: the record of {run} has no row '{predictor}' / {missing[0]}")
+            lines.append({"label": label, "r2": {m: rows[(run, predictor, m)] for m, _ in TARGETS}})
+        panels.append({"phi": phi, "noise": eps, "curves": lines})
+    return {"panels": panels}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "--records", default=str(RECORDS), help="folder of snapshot_noise.py's records (<run>.json)"
     )
-    ap.add_argument("--out", default=str(ROOT / "docs" / "figures" / "imaging_noise.png"))
     args = ap.parse_args(argv)
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(PANELS), len(TARGETS), figsize=(12, 10), sharex=True, squeeze=False)
-    floor = 5e-4  # half the last digit the tables print: an R² shown as 1.000 is drawn here
-    for row, (phi, exact, imaging, extra) in enumerate(PANELS):
-        runs = dict.fromkeys(run for run, _, _ in curves(exact, imaging, extra))
-        eps, rows = run_records(Path(args.records), runs)
-        # ε = 0 drawn a decade below the smallest ε > 0, on the log axis
-        x = np.array([e if e > 0 else min(v for v in eps if v > 0) / 10 for e in eps])
-        for col, (metric, title) in enumerate(TARGETS):
-            ax = axes[row, col]
-            for run, predictor, label in curves(exact, imaging, extra):
-                if (run, predictor, metric) not in rows:
-                    sys.exit(f"noise_figure: the record of {run} has no row '{predictor}' / {metric}")
-                unexplained = np.maximum(1.0 - np.asarray(rows[(run, predictor, metric)]), floor)
-                ax.plot(x, unexplained, label=label, **STYLE[label])
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_ylim(floor / 1.5, 5e3)
-            ax.set_title(f"φ = {phi:.2f}: {title}", fontsize=10)
-            ax.grid(True, which="major", alpha=0.3)
-            ax.set_xticks(x, ["0" if e == 0 else f"{e:g}" for e in eps], rotation=45, fontsize=8)
-            ax.minorticks_off()
-            if col == 0:
-                ax.set_ylabel("1 − R² (held out)")
-            if row == len(PANELS) - 1:
-                ax.set_xlabel("position noise ε per coordinate [a]")
-    handles = {}
-    for ax in axes.flat:
-        for handle, label in zip(*ax.get_legend_handles_labels()):
-            handles.setdefault(label, handle)
-    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=3, frameon=False)
-    fig.suptitle("Imprecise positions, N = 400: unexplained variance against the noise (lower is better)")
-    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    print(f"wrote {out}")
+    path = publish_figure(FIGURE, figure_data(Path(args.records)), command_line("noise_figure", argv))
+    print(f"wrote {path}")
     return 0
 
 

@@ -1,6 +1,7 @@
 """How a benchmark publishes: a JSON record of its section under docs/results/bench/ (its tables as
 rows of cells, its prose, its raw numbers and the command that reproduces them), from which
-``bench.render`` draws the marked section of the docs page; never the other way round."""
+``bench.render`` draws the marked section of the docs page (and the figures whose numbers it holds);
+never the other way round."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from bench.figures import draw, figures_of
 from bench.records import DOCS, RECORDS, Section, as_blocks, check_record, render_section, table, text
 from rheograph.io.pages import read_record, replace_section, write_record
 
@@ -42,7 +44,8 @@ def publish(
     ``content``: the section's blocks (a :class:`Section`, or a list of :func:`table`, :func:`text` and
     strings of prose); ``record``:
     raw numbers kept beside them; ``page`` (under docs/): by default the page the section's record already
-    names.  Where ``$RHEOGRAPH_BENCH_OUT`` is set the record goes to that folder and no page is touched.
+    names.  Figures drawn from the record (:data:`bench.figures.FIGURES`) are redrawn from it.  Where
+    ``$RHEOGRAPH_BENCH_OUT`` is set the record goes to that folder and no page or figure is touched.
     Returns the record."""
     out = os.environ.get(OUT_ENV)
     records = Path(out) if out else RECORDS
@@ -63,6 +66,8 @@ def publish(
         write_record(path, full)
         if not out:
             replace_section(DOCS / page, section, render_section(full))
+            for figure in figures_of(path.name):  # the figures this record holds the numbers of
+                draw(figure)
     return full
 
 

@@ -1,12 +1,15 @@
-"""Draw every published table of the docs pages from its JSON record.
+"""Draw every published table and figure of the docs pages from its JSON record.
 
 Each record under docs/results/bench/ (see :mod:`bench.records`) names its page and its marked section;
 this writes the section between the page's ``<!-- name:start -->`` and ``<!-- name:end -->`` markers from
-the record alone.  With ``--check`` it writes nothing and exits 1, naming every section whose page text
-differs from what its record gives (or whose markers are missing)::
+the record alone, and redraws every published figure from the record of the numbers it plots (the table
+:data:`bench.figures.FIGURES`).  With ``--check`` it writes nothing and exits 1, naming every section
+whose page text differs from what its record gives (or whose markers are missing) and every figure that
+has no record, does not redraw from it, or was not drawn from its record's numbers (how that is told
+without comparing pixels: :mod:`bench.figures`)::
 
-    python -m bench.render            # rewrite the pages' marked sections from the records
-    python -m bench.render --check    # the pages as the records give them? (make bench)
+    python -m bench.render            # rewrite the marked sections and redraw the figures from the records
+    python -m bench.render --check    # the pages and figures as the records give them? (make bench)
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import re
 import sys
 from pathlib import Path
 
+from bench import figures
 from bench.records import DOCS, RECORDS, load_records, render_section
 from rheograph.io.pages import replace_section
 
@@ -54,18 +58,24 @@ def render(records: list[dict], docs: Path = DOCS) -> int:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--check", action="store_true", help="write nothing; exit 1 where a page differs")
-    ap.add_argument("--records", default=str(RECORDS), help="the folder of section records")
-    ap.add_argument("--docs", default=str(DOCS), help="the docs folder the records' pages are under")
+    ap.add_argument("--records", default=str(RECORDS), help="the folder of section and figure records")
+    ap.add_argument(
+        "--docs", default=str(DOCS), help="the docs folder the records' pages and figures are under"
+    )
     args = ap.parse_args(argv)
     records = load_records(Path(args.records))
+    docs, folder = Path(args.docs), Path(args.records)
     if args.check:
-        diff = differences(records, Path(args.docs))
-        for line in diff:
+        diff = differences(records, docs)
+        drawn = figures.differences(docs, folder)
+        for line in diff + drawn:
             print(line, file=sys.stderr)
         print(f"{len(records)} sections checked, {len(diff)} differ from their records")
-        return 1 if diff else 0
-    changed = render(records, Path(args.docs))
+        print(f"{len(figures.FIGURES)} figures checked, {len(drawn)} problems")
+        return 1 if diff or drawn else 0
+    changed = render(records, docs)
     print(f"{len(records)} sections rendered, {changed} changed")
+    print(f"{len(figures.FIGURES)} figures drawn, {figures.render(docs, folder)} from changed records")
     return 0
 
 

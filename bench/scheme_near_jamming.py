@@ -4,14 +4,16 @@ and the same initial configuration for explicit Euler and linearly implicit spri
     python -m bench.scheme_near_jamming run  [--stress 50 10] [--seeds 1 2] [--strain 1]
                                              [--schemes euler:1e-3 euler:5e-4 euler:2.5e-4 implicit:2e-3 ...]
                                              [--max-wall 1800]
-    python -m bench.scheme_near_jamming plot  # docs/figures/scheme_near_jamming.png + markdown table
+    python -m bench.scheme_near_jamming plot  # the figure's record, the figure and a markdown table
 
 Every (seed, stress, scheme, disp_max) is one resumable trajectory under data/scheme_phi080/<run name>/
 (the layout simulate.py writes, so runs made with ``python simulate.py ... output_root=data/scheme_phi080``
 are picked up).  ``--max-wall`` bounds one invocation of one run (wall seconds); rerunning the command
 resumes the unfinished ones.  A run ends early when the flow stops (status ``jammed``: apparent viscosity
 above ``jam_viscosity`` for ``jam_intervals`` output intervals).  The verdict per (seed, stress) is read
-off the finest discretisation of each scheme.
+off the finest discretisation of each scheme.  ``plot`` keeps the curves it draws in
+docs/results/bench/figures/scheme_near_jamming.json, from which it draws
+docs/figures/scheme_near_jamming.png (as ``python -m bench.render`` does).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate
 
 import numpy as np  # noqa: E402
 
+from bench.figures import publish_figure  # noqa: E402
+from rheograph.io.figures import significant  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
 from rheograph.naming import run_name  # noqa: E402
 from rheograph.runs.runner import run_state_point  # noqa: E402
@@ -32,6 +36,7 @@ from rheograph.sim.params import SimParams, scheme_name, scheme_settings  # noqa
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "data" / "scheme_phi080"
+FIGURE = "figures/scheme_near_jamming.png"
 DEFAULT_SCHEMES = [
     "euler:1e-3",
     "euler:5e-4",
@@ -130,40 +135,27 @@ def collect(phi: float) -> list[dict]:
     return rows
 
 
+def figure_data(rows: list[dict], phi: float) -> dict:
+    """The numbers :func:`bench.figures.draw_scheme_near_jamming` plots: per run its (seed, σ/σ0, scheme,
+    disp_max, status) and the strain and apparent viscosity of its flowing output intervals (6 digits)."""
+    keys = ("seed", "stress", "scheme", "disp_max", "status")
+    runs = [
+        {
+            **{k: r[k] for k in keys},
+            "strain": significant(r["strain"], 6),
+            "viscosity": significant(r["viscosity"], 6),
+        }
+        for r in rows
+    ]
+    return {"phi": phi, "runs": runs}
+
+
 def plot(args) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows = collect(args.phi)
     if not rows:
         raise SystemExit(f"no runs at phi = {args.phi} under {OUT}")
-    panels = sorted({(r["stress"], r["seed"]) for r in rows}, key=lambda k: (-k[0], k[1]))
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.5 * len(panels), 3.8), squeeze=False)
-    colours = {"euler": "tab:red", "implicit": "tab:blue", "euler-lagged": "tab:orange"}
-    disps = sorted({r["disp_max"] for r in rows}, reverse=True)
-    styles = dict(zip(disps, ["-", "--", ":", "-."] * 3))
-    for ax, (stress, seed) in zip(axes[0], panels):
-        for r in sorted(
-            (r for r in rows if (r["stress"], r["seed"]) == (stress, seed)), key=lambda r: r["scheme"]
-        ):
-            label = f"{r['scheme']} {r['disp_max']:g}" + (" (jammed)" if r["status"] == "jammed" else "")
-            ax.semilogy(
-                r["strain"],
-                r["viscosity"],
-                styles[r["disp_max"]],
-                color=colours.get(r["scheme"]),
-                lw=1,
-                label=label,
-            )
-        ax.set_title(f"φ = {args.phi:g}, σ/σ0 = {stress:g}, seed {seed}")
-        ax.set_xlabel("strain γ")
-        ax.set_ylabel("η_r = σ Δt/Δγ per 0.01 strain")
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    out = ROOT / "docs" / "figures" / "scheme_near_jamming.png"
-    fig.savefig(out, dpi=120)
+    command = f"python -m bench.scheme_near_jamming plot --phi {args.phi:g}"
+    out = publish_figure(FIGURE, figure_data(rows, args.phi), command)
     print(f"wrote {out.relative_to(ROOT)}")
     print(
         "| σ/σ0 | seed | scheme | disp_max | status | strain reached | η_r = σ Δt/Δγ before jamming "

@@ -4,12 +4,14 @@ Euler with the current-speed step control (``euler``) and linearly implicit spri
 
     python -m bench.time_step_convergence run  [--stress 10 200] [--disp 4e-3 2e-3 1e-3 5e-4]
                                                [--schemes euler-lagged euler implicit] [--seeds 1]
-    python -m bench.time_step_convergence plot  # docs/figures/time_step_convergence.png + markdown table
+    python -m bench.time_step_convergence plot  # the figure's record, the figure and a markdown table
 
 Runs are resumable (one trajectory file per point under data/time_step/).  The cost axis is steps per unit
 strain: the cost of a step is the same for every scheme (docs/validation/speed.md), and, unlike wall
 seconds, it does not depend on the solver backend or on the machine's load; the wall seconds per strain
-recorded by this script are listed in the table with the backend that produced them.
+recorded by this script are listed in the table with the backend that produced them.  ``plot`` keeps the
+numbers it draws in docs/results/bench/figures/time_step_convergence.json, from which it draws
+docs/figures/time_step_convergence.png (as ``python -m bench.render`` does).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate
 
 import numpy as np  # noqa: E402
 
+from bench.figures import SCHEME_MARKERS, publish_figure  # noqa: E402
 from rheograph.analysis.flow_curves import reference_points  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
 from rheograph.naming import run_name  # noqa: E402
@@ -32,7 +35,8 @@ from rheograph.sim.params import SimParams, scheme_name, scheme_settings  # noqa
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "data" / "time_step"
-MARKERS = {"euler-lagged": "^", "euler": "o", "implicit": "s"}  # the schemes compared, by label
+SCHEMES = ("euler-lagged", "euler", "implicit")  # the schemes compared, by label
+FIGURE = "figures/time_step_convergence.png"
 
 
 def run(args) -> None:
@@ -91,13 +95,16 @@ def collect() -> list[dict]:
     return rows
 
 
+def figure_data(rows: list[dict], phi: float, n: int) -> dict:
+    """The numbers :func:`bench.figures.draw_time_step_convergence` plots: per run (``rows``, this
+    script's and LF_DEM's) its σ/σ0, scheme, disp_max, steps per strain and the means ± standard errors
+    of η_r, Π [σ0] and Z_μ."""
+    keys = ("stress", "scheme", "disp_max", "steps_per_strain")
+    values = [k for key in ("viscosity", "pressure", "z_mu") for k in (key, key + "_se")]
+    return {"phi": phi, "n": n, "points": [{k: r[k] for k in (*keys, *values)} for r in rows]}
+
+
 def plot(args) -> None:
-    import matplotlib
-    import matplotlib.ticker
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows = collect()
     stresses = sorted({r["stress"] for r in rows})
     reference = []
@@ -107,28 +114,18 @@ def plot(args) -> None:
             for r in reference_points(args.reference, strain_min=args.steady)
             if r["phi"] == args.phi and r["n_particles"] == args.n and r["stress"] in stresses
         ]
-    fig, axes = plt.subplots(len(stresses), 3, figsize=(13, 3.6 * len(stresses)), squeeze=False)
+    command = f"python -m bench.time_step_convergence plot --phi {args.phi:g} --n {args.n}"
+    out = publish_figure(FIGURE, figure_data(rows + reference, args.phi, args.n), command)
     lines = [
         "| σ/σ0 | scheme | disp_max | η_r (± s.e.) | Π/σ | Z_μ | steps/strain | wall s/strain | solver |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for row_axes, stress in zip(axes, stresses):
-        for scheme, marker in {**MARKERS, "LF_DEM": "x"}.items():
+    for stress in stresses:
+        for scheme in SCHEME_MARKERS:
             sel = sorted(
                 (r for r in rows + reference if r["stress"] == stress and r["scheme"] == scheme),
                 key=lambda r: -r["disp_max"],
             )
-            if not sel:
-                continue
-            cost = np.array([r["steps_per_strain"] for r in sel])
-            for ax, key, scale in zip(row_axes, ("viscosity", "pressure", "z_mu"), (1.0, 1.0 / stress, 1.0)):
-                y = np.array([r[key] for r in sel]) * scale
-                err = np.array([r[key + "_se"] for r in sel]) * scale
-                ax.errorbar(cost, y, yerr=err, marker=marker, capsize=3, label=scheme)
-                for c, yy, r in zip(cost, y, sel):
-                    ax.annotate(
-                        f"{r['disp_max']:g}", (c, yy), textcoords="offset points", xytext=(4, 4), fontsize=7
-                    )
             for r in sel:
                 wall = f"{r['s_per_strain']:.1f}" if np.isfinite(r["s_per_strain"]) else "–"
                 lines.append(
@@ -136,18 +133,6 @@ def plot(args) -> None:
                     f"{r['viscosity_se']:.1f} | {r['pressure'] / stress:.3f} | {r['z_mu']:.2f} | "
                     f"{r['steps_per_strain']:.0f} | {wall} | {r['solver']} |"
                 )
-        for ax, label in zip(row_axes, ("η_r", "Π/σ", "Z_μ")):
-            ax.set_xscale("log")
-            ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
-            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-            ax.set_xlabel("steps per unit strain (cost; N = 400)")
-            ax.set_ylabel(label)
-            ax.set_title(f"φ = {args.phi}, σ/σ0 = {stress:g}")
-            ax.legend(fontsize=8)
-    fig.tight_layout()
-    out = ROOT / "docs" / "figures" / "time_step_convergence.png"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
     print("\n".join(lines))
     print(f"wrote {out}")
 
@@ -157,7 +142,7 @@ def main() -> None:
     ap.add_argument("mode", choices=("run", "plot"))
     ap.add_argument("--stress", type=float, nargs="+", default=[10.0, 200.0])
     ap.add_argument("--disp", type=float, nargs="+", default=[4e-3, 2e-3, 1e-3, 5e-4])
-    ap.add_argument("--schemes", nargs="+", choices=list(MARKERS), default=list(MARKERS))
+    ap.add_argument("--schemes", nargs="+", choices=SCHEMES, default=list(SCHEMES))
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--phi", type=float, default=0.76)
     ap.add_argument("--n", type=int, default=400)

@@ -9,7 +9,8 @@ All on the committed paper-scale set (held-out whole trajectories, ``data.split=
 
 Each subcommand writes its marked section of docs/validation/surrogate_cost.md (``--no-write``: print
 only) and keeps its raw results in docs/results/train_speed/<subcommand>.json; ``--reuse`` re-renders
-from that file.
+from that file.  The records of ``accuracy`` and ``pareto`` (docs/results/bench/train_speed_<subcommand>
+.json) keep the numbers of their figures too, drawn from them (as by ``python -m bench.render``).
 
 * ``levers``: seconds per training epoch (median of ``--repeats`` epochs after one warm-up epoch, one
   thread) of the default model on fold 0's training graphs for one lever at a time: ``torch.compile``
@@ -299,30 +300,18 @@ def render_accuracy(rows, args) -> Section:
         "",
         f"Command: `{command_line()}`",
     )
-    plot_accuracy(rows)
     return out
 
 
-def plot_accuracy(rows) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ns = sorted({r["n"] for r in rows})
-    fig, axes = plt.subplots(len(ns), 3, figsize=(12, 3.3 * len(ns)), squeeze=False)
-    for i, n in enumerate(ns):
-        for j, key in enumerate(SCORES):
-            ax = axes[i, j]
-            for r in (r for r in rows if r["n"] == n):
-                t = [c["seconds"] / 60 for c in r["curve"]]
-                ax.plot(t, [c[key] for c in r["curve"]], label=r["label"])
-            ax.set_ylim(0.5 if key != "r2_log_eta" else 0.0, 1.0)
-            ax.set_title(f"N = {n}: R² {LABELS[key]} (held-out)")
-            ax.set_xlabel("training minutes (1 thread)")
-            ax.legend()
-    fig.tight_layout()
-    fig.savefig(ROOT / "docs" / "figures" / "time_to_accuracy.png", dpi=110)
+def accuracy_figure(rows, args) -> dict:
+    """The numbers of docs/figures/time_to_accuracy.png (:func:`bench.figures.draw_time_to_accuracy`):
+    per (N, configuration) the training minutes and the held-out R² of each target at every epoch."""
+    runs = [
+        {"n": r["n"], "label": r["label"], "minutes": [c["seconds"] / 60 for c in r["curve"]]}
+        | {key: [c[key] for c in r["curve"]] for key in SCORES}
+        for r in rows
+    ]
+    return {"runs": runs}
 
 
 # ---- accuracy against model size and inference time ----------------------------------------------------
@@ -386,51 +375,18 @@ def pareto(args) -> list[dict]:
     return rows
 
 
-def pareto_front(points) -> list[int]:
-    """Indices of the points not dominated in (cost lower, score higher)."""
-    front = []
-    for i, (c, s) in enumerate(points):
-        if not any((c2 <= c and s2 >= s) and (c2, s2) != (c, s) for c2, s2 in points):
-            front.append(i)
-    return front
+def pareto_figure(rows, args) -> dict:
+    """The numbers of docs/figures/surrogate_pareto.png (:func:`bench.figures.draw_surrogate_pareto`): per
+    model its variant, size, held-out R² of each target, ms per snapshot (graph building + forward) and
+    training minutes."""
+    keys = ("variant", "layers", "width", "scores", "train_minutes")
+    return {
+        "phi": args.phi,
+        "models": [{k: r[k] for k in keys} | {"ms": r["forward_ms"] + r["build_ms"]} for r in rows],
+    }
 
 
 def render_pareto(rows, args) -> Section:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7))
-    markers = {"physics": "o", "physics_positions": "s", "paper": "^", "physics_layer_norm": "D"}
-    for j, key in enumerate(SCORES):
-        for i, cost in enumerate(("ms", "train_minutes")):
-            ax = axes[i, j]
-            xs = [r["forward_ms"] + r["build_ms"] if cost == "ms" else r[cost] for r in rows]
-            for r, x in zip(rows, xs):
-                ax.scatter(
-                    x,
-                    r["scores"][key],
-                    marker=markers.get(r["variant"], "o"),
-                    color="k" if (r["layers"], r["width"]) == (2, 64) else "tab:blue",
-                )
-                ax.annotate(f"{r['layers']}×{r['width']}", (x, r["scores"][key]), fontsize=7)
-            phys = [k for k, r in enumerate(rows) if r["variant"] == "physics"]
-            front = [phys[k] for k in pareto_front([(xs[k], rows[k]["scores"][key]) for k in phys])]
-            front.sort(key=lambda k: xs[k])
-            ax.plot([xs[k] for k in front], [rows[k]["scores"][key] for k in front], "r--", lw=1)
-            ax.set_xscale("log")
-            ax.set_xlabel(
-                "ms per snapshot (build + forward)" if cost == "ms" else "training minutes (1 fold, 1 thread)"
-            )
-            ax.set_ylabel(f"held-out R² {LABELS[key]}")
-    fig.suptitle(
-        "fold 0, φ = 0.76, N = 400; circles: physics + σ, diamond: physics + σ with layer norm, squares: "
-        "physics positions only, triangles: paper; black: the paper's 2×64; red: Pareto front (physics)",
-        fontsize=9,
-    )
-    fig.tight_layout()
-    fig.savefig(ROOT / "docs" / "figures" / "surrogate_pareto.png", dpi=110)
     out = Section(
         f"Fold 0 of 5 (held-out whole trajectories), φ = {args.phi}, N = 400, {args.epochs} epochs (cosine; "
         "the paper variant with its constant rate), batch 32, one torch thread.  ms per snapshot = graph "
@@ -607,6 +563,8 @@ def command_line() -> str:
     )
 
 
+# the subcommands whose record holds the numbers of a figure too, and the function that picks them
+FIGURE_DATA = {"accuracy": accuracy_figure, "pareto": pareto_figure}
 RUNNERS = {
     "levers": (levers, render_levers),
     "accuracy": (accuracy, render_accuracy),
@@ -674,11 +632,13 @@ def main(argv=None) -> None:
                 indent=1,
             )
         )
+    figure = FIGURE_DATA.get(args.what)
     publish(
         f"train_speed_{args.what}",
         render(rows, args),
         not args.no_write,
         page="validation/surrogate_cost.md",
+        record={"figure": figure(rows, args)} if figure else None,
         command=command_line(),
     )
 

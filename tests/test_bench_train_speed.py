@@ -1,4 +1,5 @@
-"""bench/train_speed.py's bookkeeping: the Pareto front against brute force, and time to accuracy."""
+"""bench/train_speed.py's bookkeeping: the Pareto front of its figure against brute force, and time to
+accuracy."""
 
 import itertools
 
@@ -6,16 +7,18 @@ import numpy as np
 import pytest
 from conftest import load_bench_script
 
+from bench.figures import pareto_front
+
 
 @pytest.fixture(scope="module")
 def train_speed():
     return load_bench_script("train_speed")
 
 
-def test_pareto_front_matches_brute_force(train_speed):
+def test_pareto_front_matches_brute_force():
     rng = np.random.default_rng(3)
     points = [(float(c), float(s)) for c, s in zip(rng.integers(1, 6, 40), rng.integers(0, 6, 40))]
-    front = set(train_speed.pareto_front(points))
+    front = set(pareto_front(points))
     for i, (c, s) in enumerate(points):
         dominated = any(
             c2 <= c and s2 >= s and (c2 < c or s2 > s) for j, (c2, s2) in enumerate(points) if j != i
