@@ -305,8 +305,9 @@ RELAXED_GRAPH_INPUTS = (
 SHELL_WIDTHS = (0.01, 0.03, 0.1, 0.3)
 SHELL_INPUTS = tuple(f"shell_{kind}_{w:g}" for w in SHELL_WIDTHS for kind in ("pairs", "fabric", "normal"))
 # known conditions of a snapshot: log(sigma/sigma0), phi, and the RMS position error per coordinate [a]
-# (0 for simulator output; an experimenter's tracking precision)
-KNOWN_GRAPH_INPUTS = ("log_stress", "phi", "position_noise")
+# (0 for simulator output; an experimenter's tracking precision), in 3D also the RMS error along the
+# microscope's optical axis (``axial_noise``: confocal tracking is several times coarser in depth)
+KNOWN_GRAPH_INPUTS = ("log_stress", "phi", "position_noise", "axial_noise")
 GRAPH_INPUTS = (*KNOWN_GRAPH_INPUTS, *COMPUTED_GRAPH_INPUTS, *RELAXED_GRAPH_INPUTS, *SHELL_INPUTS)
 
 
