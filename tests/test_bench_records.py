@@ -8,8 +8,8 @@ import shutil
 
 import pytest
 
-from bench import gpu_report, render
-from bench.records import DOCS, RECORDS, load_records, render_section
+from bench import gpu_report, render, scheme_near_jamming, time_step_convergence
+from bench.records import DOCS, RECORDS, ROOT, as_blocks, load_records, render_section
 from rheograph.io.pages import render_blocks
 
 MARKER = re.compile(r"<!-- ([\w.-]+):start -->")
@@ -93,3 +93,20 @@ def test_the_gpu_tables_are_what_gpu_report_draws_from_the_committed_measurement
     (record,) = [r for r in load_records() if r["section"] == "gpu_cpu"]
     measured = json.loads((DOCS / "results" / "gpu" / "cpu.json").read_text())
     assert gpu_report.render(measured).rstrip("\n") in render_section(record)
+
+
+def record_blocks(section: str) -> list[dict]:
+    (record,) = [r for r in load_records() if r["section"] == section]
+    return record["blocks"]
+
+
+def test_the_time_step_tables_are_what_their_benchmarks_draw_from_the_committed_runs():
+    """The two benchmarks' ``plot`` write these records; from the committed runs they give them unchanged."""
+    rows = time_step_convergence.collect()
+    stresses = sorted({r["stress"] for r in rows})
+    lfdem = time_step_convergence.lfdem_rows(
+        ROOT / "data/lfdem_reference/lfdem_phi0.76", 0.76, 400, stresses, 0.5
+    )
+    assert as_blocks(time_step_convergence.section(rows + lfdem)) == record_blocks("time_step_convergence")
+    near_jamming = scheme_near_jamming.section(scheme_near_jamming.collect(0.80))
+    assert as_blocks(near_jamming) == record_blocks("scheme_near_jamming")
