@@ -13,6 +13,7 @@ import pytest
 
 from bench import (
     gpu_report,
+    microscope,
     physics_rows,
     render,
     scheme_near_jamming,
@@ -167,3 +168,10 @@ def test_the_uncertainty_record_is_a_table_and_its_benchmark_lays_it_out():
     lead = record["blocks"][0]["text"].split("\n")[0]
     out = surrogate_uncertainty.section(lead, table["rows"], 0.0345, 0.86, record["command"])
     assert as_blocks(out) == record["blocks"]
+
+
+def test_the_microscope_section_is_what_its_benchmark_draws_from_its_committed_result():
+    """bench.microscope writes the tutorial's record from its run's result, committed beside it."""
+    (record,) = [r for r in load_records() if r["section"] == "microscope_bench"]
+    result = json.loads((DOCS / "results" / "microscope" / "N400_phi0.76_imaging.json").read_text())
+    assert as_blocks(microscope.section(result, result["command"])) == record["blocks"]
