@@ -4,7 +4,7 @@ and the same initial configuration for explicit Euler and linearly implicit spri
     python -m bench.scheme_near_jamming run  [--stress 50 10] [--seeds 1 2] [--strain 1]
                                              [--schemes euler:1e-3 euler:5e-4 euler:2.5e-4 implicit:2e-3 ...]
                                              [--max-wall 1800]
-    python -m bench.scheme_near_jamming plot  # docs/figures/scheme_near_jamming.png + markdown table
+    python -m bench.scheme_near_jamming plot  # docs/figures/scheme_near_jamming.png + the table's record
 
 Every (seed, stress, scheme, disp_max) is one resumable trajectory under data/scheme_phi080/<run name>/
 (the layout simulate.py writes, so runs made with ``python simulate.py ... output_root=data/scheme_phi080``
@@ -25,6 +25,7 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate
 
 import numpy as np  # noqa: E402
 
+from bench.publishing import Section, command_line, publish  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
 from rheograph.naming import run_name  # noqa: E402
 from rheograph.runs.runner import run_state_point  # noqa: E402
@@ -32,6 +33,26 @@ from rheograph.sim.params import SimParams, scheme_name, scheme_settings  # noqa
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "data" / "scheme_phi080"
+HEADER = (
+    "σ/σ0",
+    "seed",
+    "scheme",
+    "disp_max",
+    "status",
+    "strain reached",
+    "η_r = σ Δt/Δγ before jamming",
+    "η_r, 0.1-strain blocks from 0.2 (± s.e.)",
+    "steps/strain",
+    "CPU s",
+)
+# the invocations that made the committed runs (the published section quotes them to reproduce its table)
+RUNS = (
+    "python -m bench.scheme_near_jamming run --stress 50 --seeds 1",
+    "python -m bench.scheme_near_jamming run --stress 50 --seeds 2 --schemes implicit:2e-3 implicit:1e-3 "
+    "implicit:5e-4",
+    "python -m bench.scheme_near_jamming run --stress 10 --seeds 1 --schemes euler:5e-4 euler:2.5e-4 "
+    "implicit:2e-3 implicit:1e-3 implicit:5e-4",
+)
 DEFAULT_SCHEMES = [
     "euler:1e-3",
     "euler:5e-4",
@@ -165,23 +186,44 @@ def plot(args) -> None:
     out = ROOT / "docs" / "figures" / "scheme_near_jamming.png"
     fig.savefig(out, dpi=120)
     print(f"wrote {out.relative_to(ROOT)}")
-    print(
-        "| σ/σ0 | seed | scheme | disp_max | status | strain reached | η_r = σ Δt/Δγ before jamming "
-        "| η_r, 0.1-strain blocks from 0.2 (± s.e.) | steps/strain | CPU s |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    command = command_line("scheme_near_jamming")
+    publish("scheme_near_jamming", section(rows), not args.no_write, command=command)
+
+
+def table_rows(rows: list[dict]) -> list[list[str]]:
+    """The published cells, one row per run: stress descending, then seed, scheme and step descending."""
+    out = []
     for r in sorted(rows, key=lambda r: (-r["stress"], r["seed"], r["scheme"], -r["disp_max"])):
-        print(
-            f"| {r['stress']:g} | {r['seed']} | {r['scheme']} | {r['disp_max']:g} | {r['status']} | "
-            f"{r['strain_reached']:.2f} | {r['mean_viscosity']:.0f} | "
-            + (
-                f"{r['block_viscosity'][0]:.0f} ± {r['block_viscosity'][1]:.0f}"
-                if np.isfinite(r["block_viscosity"][0])
-                else "–"
-            )
-            + f" | {r['steps_per_strain']:.3g} | "
-            f"{r['cpu_seconds']:.0f} |"
+        mean, se = r["block_viscosity"]
+        out.append(
+            [
+                f"{r['stress']:g}",
+                f"{r['seed']}",
+                r["scheme"],
+                f"{r['disp_max']:g}",
+                r["status"],
+                f"{r['strain_reached']:.2f}",
+                f"{r['mean_viscosity']:.0f}",
+                f"{mean:.0f} ± {se:.0f}" if np.isfinite(mean) else "–",
+                f"{r['steps_per_strain']:.3g}",
+                f"{r['cpu_seconds']:.0f}",
+            ]
         )
+    return out
+
+
+def section(rows: list[dict]) -> Section:
+    """The published section: the commands that made the committed runs, and the table of every run."""
+    out = Section(
+        "```bash",
+        f"# the {len(rows)} committed runs under data/scheme_phi080/ (resumable; --max-wall per run)",
+        *RUNS,
+        "python -m bench.scheme_near_jamming plot   # figure + table, from the committed runs alone",
+        "```",
+        "",
+    )
+    out.table(HEADER, table_rows(rows))
+    return out
 
 
 def main() -> None:
@@ -198,6 +240,7 @@ def main() -> None:
     p_run.add_argument("--max-wall", type=float, default=1800.0)
     p_plot = sub.add_parser("plot")
     p_plot.add_argument("--phi", type=float, default=0.80)
+    p_plot.add_argument("--no-write", action="store_true", help="print the table, write no record")
     args = parser.parse_args()
     run(args) if args.command == "run" else plot(args)
 
