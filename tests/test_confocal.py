@@ -172,3 +172,59 @@ def test_predictions_flag_an_axial_precision_beyond_the_trained_one(snaps):
     isotropic = {k: v for k, v in domain.items() if k != "axial_noise"}
     (reason,) = reasons(isotropic, 0.02, 0.25)
     assert "positions known to 0.25 a, beyond the 0.03 a" in reason
+
+
+def test_centres_closer_than_a_radius_are_refused_unless_the_stated_precision_explains_them(snaps):
+    """A centre 0.9 a from another's is refused for exact positions and at the 2D imaging range's widest
+    noise (0.05 a), but not where the precision along one axis is 0.3 a (confocal depth), which brings
+    touching centres that close in one pair of ~10^3."""
+    from rheograph.graphs.features3d import check_separations3d
+    from rheograph.io.configurations import wrap_into_box3d
+
+    box3 = (snaps.lx, snaps.ly, snaps.lz, float(snaps.le_offset[0]))
+    pos = snaps.positions[0].copy()
+    small = np.flatnonzero(snaps.radii == 1.0)[:2]
+    pos[small[1]] = pos[small[0]] + np.array([0.0, 0.9, 0.0])
+    pos = wrap_into_box3d(pos, *box3)
+    for noise in (0.0, 0.05):
+        with pytest.raises(InputError, match="are 0.9 a apart, one centre within the other particle"):
+            check_separations3d("x", pos, snaps.radii, box3, noise)
+    check_separations3d("x", pos, snaps.radii, box3, 0.3)
+
+
+@pytest.mark.slow
+def test_a_confocal_model_trains_predicts_and_is_scored_on_noise_pairs(tmp_path, capsys):
+    """train.py graph=imaging_confocal on three tiny 3D runs (fold 0, 2 epochs), then: its card's domain
+    holds both trained ranges, predictions flag an axial precision beyond them, and bench.confocal_noise
+    scores every predictor at every noise pair, the lookup alike at all of them (it reads no positions);
+    about a minute."""
+    import torch
+    from conftest import load_bench_script, train_tiny_fold
+
+    import rheograph
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for seed, stress in enumerate((5.0, 10.0, 20.0), start=1):
+        params = SimParams3D(
+            n_particles=50, phi=0.6, stress=stress, strain=0.1, output_interval=0.01, snapshot_interval=0.02,
+            steady_state_strain=0.0, integrator="implicit", disp_max=5e-3, seed=seed,
+        )  # fmt: skip
+        assert run_state_point(params, data / f"s{stress:g}.h5", progress=False).status == "completed"
+    run = train_tiny_fold([data / "s5.h5"], tmp_path, "graph=imaging_confocal", "data.split=grouped")
+    domain = torch.load(run / "fold0.pt", weights_only=True)["domain"]
+    assert domain["position_noise"] == [1e-4, 0.05] and domain["axial_noise"] == [1e-3, 0.5]
+    model = rheograph.load_model(run / "fold0.pt")
+    snaps = read_snapshots(data / "s10.h5")
+    inside = model.predict_snapshots(dataclasses.replace(snaps, position_noise=0.02, axial_noise=0.3))
+    beyond = model.predict_snapshots(dataclasses.replace(snaps, position_noise=0.02, axial_noise=0.8))
+    assert np.isfinite(inside["eta_pred"]).all() and "optical axis" not in " ".join(inside["notes"])
+    assert not beyond["in_domain"].any() and "along the optical axis (y)" in beyond["notes"][0]
+    bench = load_bench_script("confocal_noise")
+    args = [str(run), "--folds", "0", "--noise", "0", "0.03", "--axial-noise", "0", "0.3", "--no-write"]
+    assert bench.main([*args, "--cache-dir", str(tmp_path / "cache")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    lookup = [line for line in lines if "| lookup: mean at (φ, σ) |" in line]
+    network = [line for line in lines if "| graph network |" in line]
+    assert len(lookup) == len(network) == 4
+    assert len({line.split("|", 3)[3] for line in lookup}) == 1  # the same scores at every noise pair

@@ -302,12 +302,15 @@ def snapshot_graphs(
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
     stated_axial = snaps.position_noise if snaps.axial_noise is None else snaps.axial_noise
     axial = np.broadcast_to(np.nan_to_num(np.asarray(stated_axial, dtype=np.float64)), (len(snaps),))
+    coarsest = np.maximum(noise, axial)  # how close imprecise positions may bring two centres
     for idx in keep:
         where = f"{path}, snapshot {idx}"
         if three_d:
-            check_separations3d(where, snaps.positions[idx], radii, (*edges, snaps.le_offset[idx]))
+            check_separations3d(
+                where, snaps.positions[idx], radii, (*edges, snaps.le_offset[idx]), coarsest[idx]
+            )
         else:
-            check_separations(where, snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx])
+            check_separations(where, snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx], coarsest[idx])
     if settings.relax_strain and "disp_max" not in solve_params:
         raise InputError(
             f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "
