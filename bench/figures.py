@@ -330,10 +330,10 @@ FIGURES: dict[str, Figure] = {
     ),
     "figures/imaging_noise.png": Figure(draw_imaging_noise, "figures/imaging_noise.json", "figure", 110),
     "figures/scheme_near_jamming.png": Figure(
-        draw_scheme_near_jamming, "figures/scheme_near_jamming.json", "figure", 120
+        draw_scheme_near_jamming, "scheme_near_jamming.json", "figure", 120
     ),
     "figures/time_step_convergence.png": Figure(
-        draw_time_step_convergence, "figures/time_step_convergence.json", "figure", 120
+        draw_time_step_convergence, "time_step_convergence.json", "figure", 120
     ),
     "figures/surrogate_r2_vs_phi.png": Figure(
         draw_surrogate_r2_vs_phi, "surrogate_per_phi.json", "figure", 110

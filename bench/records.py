@@ -4,7 +4,8 @@ A record (``docs/results/bench/<section>.json``) holds one published section: ``
 name), ``page`` (under docs/), ``command`` (what produced its numbers, or null where the section quotes
 several) and ``blocks``, the section in order: ``{"text": ...}`` for prose and ``{"table": {"header":
 [...], "align": [...], "rows": [[...], ...]}}`` for a table, whose cells are the published numbers as
-printed.  A benchmark may add its raw numbers under other keys (read by figures and other benchmarks).
+printed (with ``"indent"``, the spaces of a table inside a list item).  A benchmark may add its raw
+numbers under other keys (read by figures and other benchmarks).
 """
 
 from __future__ import annotations
@@ -81,6 +82,8 @@ def check_record(record: dict, where: str = "record") -> None:
             width = len(t.get("header", []))
             if not width or len(t.get("align", [])) != width:
                 raise InputError(f"{where}: block {k}: a table needs a header and one align cell per column")
+            if t.get("indent", "").strip():
+                raise InputError(f"{where}: block {k}: a table's indent must be spaces")
             bad = [i for i, row in enumerate(t.get("rows", [])) if len(row) != width]
             if bad:
                 raise InputError(f"{where}: block {k}: rows {bad} do not have {width} cells")

@@ -4,16 +4,17 @@ and the same initial configuration for explicit Euler and linearly implicit spri
     python -m bench.scheme_near_jamming run  [--stress 50 10] [--seeds 1 2] [--strain 1]
                                              [--schemes euler:1e-3 euler:5e-4 euler:2.5e-4 implicit:2e-3 ...]
                                              [--max-wall 1800]
-    python -m bench.scheme_near_jamming plot  # the figure's record, the figure and a markdown table
+    python -m bench.scheme_near_jamming plot  # the table's record (with the figure's curves), the figure
 
 Every (seed, stress, scheme, disp_max) is one resumable trajectory under data/scheme_phi080/<run name>/
 (the layout simulate.py writes, so runs made with ``python simulate.py ... output_root=data/scheme_phi080``
 are picked up).  ``--max-wall`` bounds one invocation of one run (wall seconds); rerunning the command
 resumes the unfinished ones.  A run ends early when the flow stops (status ``jammed``: apparent viscosity
 above ``jam_viscosity`` for ``jam_intervals`` output intervals).  The verdict per (seed, stress) is read
-off the finest discretisation of each scheme.  ``plot`` keeps the curves it draws in
-docs/results/bench/figures/scheme_near_jamming.json, from which it draws
-docs/figures/scheme_near_jamming.png (as ``python -m bench.render`` does).
+off the finest discretisation of each scheme.  ``plot`` keeps the table and the curves the figure draws in
+the section's record, docs/results/bench/scheme_near_jamming.json, from which it draws the page's section
+and docs/figures/scheme_near_jamming.png (as ``python -m bench.render`` does); ``--no-write`` prints the
+table and writes nothing.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # CHOLMOD's OpenMP (see simulate
 
 import numpy as np  # noqa: E402
 
-from bench.figures import publish_figure  # noqa: E402
+from bench.publishing import Section, command_line, publish  # noqa: E402
 from rheograph.io.figures import significant  # noqa: E402
 from rheograph.io.hdf5 import read_run_info, read_timeseries  # noqa: E402
 from rheograph.naming import run_name  # noqa: E402
@@ -36,7 +37,26 @@ from rheograph.sim.params import SimParams, scheme_name, scheme_settings  # noqa
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "data" / "scheme_phi080"
-FIGURE = "figures/scheme_near_jamming.png"
+HEADER = (
+    "σ/σ0",
+    "seed",
+    "scheme",
+    "disp_max",
+    "status",
+    "strain reached",
+    "η_r = σ Δt/Δγ before jamming",
+    "η_r, 0.1-strain blocks from 0.2 (± s.e.)",
+    "steps/strain",
+    "CPU s",
+)
+# the invocations that made the committed runs (the published section quotes them to reproduce its table)
+RUNS = (
+    "python -m bench.scheme_near_jamming run --stress 50 --seeds 1",
+    "python -m bench.scheme_near_jamming run --stress 50 --seeds 2 --schemes implicit:2e-3 implicit:1e-3 "
+    "implicit:5e-4",
+    "python -m bench.scheme_near_jamming run --stress 10 --seeds 1 --schemes euler:5e-4 euler:2.5e-4 "
+    "implicit:2e-3 implicit:1e-3 implicit:5e-4",
+)
 DEFAULT_SCHEMES = [
     "euler:1e-3",
     "euler:5e-4",
@@ -154,26 +174,51 @@ def plot(args) -> None:
     rows = collect(args.phi)
     if not rows:
         raise SystemExit(f"no runs at phi = {args.phi} under {OUT}")
-    command = f"python -m bench.scheme_near_jamming plot --phi {args.phi:g}"
-    out = publish_figure(FIGURE, figure_data(rows, args.phi), command)
-    print(f"wrote {out.relative_to(ROOT)}")
-    print(
-        "| σ/σ0 | seed | scheme | disp_max | status | strain reached | η_r = σ Δt/Δγ before jamming "
-        "| η_r, 0.1-strain blocks from 0.2 (± s.e.) | steps/strain | CPU s |"
+    # the record keeps the figure's curves too: publishing it draws docs/figures/scheme_near_jamming.png
+    publish(
+        "scheme_near_jamming",
+        section(rows),
+        not args.no_write,
+        record={"figure": figure_data(rows, args.phi)},
+        command=command_line("scheme_near_jamming"),
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+
+
+def table_rows(rows: list[dict]) -> list[list[str]]:
+    """The published cells, one row per run: stress descending, then seed, scheme and step descending."""
+    out = []
     for r in sorted(rows, key=lambda r: (-r["stress"], r["seed"], r["scheme"], -r["disp_max"])):
-        print(
-            f"| {r['stress']:g} | {r['seed']} | {r['scheme']} | {r['disp_max']:g} | {r['status']} | "
-            f"{r['strain_reached']:.2f} | {r['mean_viscosity']:.0f} | "
-            + (
-                f"{r['block_viscosity'][0]:.0f} ± {r['block_viscosity'][1]:.0f}"
-                if np.isfinite(r["block_viscosity"][0])
-                else "–"
-            )
-            + f" | {r['steps_per_strain']:.3g} | "
-            f"{r['cpu_seconds']:.0f} |"
+        mean, se = r["block_viscosity"]
+        out.append(
+            [
+                f"{r['stress']:g}",
+                f"{r['seed']}",
+                r["scheme"],
+                f"{r['disp_max']:g}",
+                r["status"],
+                f"{r['strain_reached']:.2f}",
+                f"{r['mean_viscosity']:.0f}",
+                f"{mean:.0f} ± {se:.0f}" if np.isfinite(mean) else "–",
+                f"{r['steps_per_strain']:.3g}",
+                f"{r['cpu_seconds']:.0f}",
+            ]
         )
+    return out
+
+
+def section(rows: list[dict]) -> Section:
+    """The published section: the commands that made the committed runs, and the table of every run."""
+    out = Section(
+        "```bash",
+        f"# the {len(rows)} committed runs under data/scheme_phi080/ (resumable; --max-wall per run)",
+        *RUNS,
+        "python -m bench.scheme_near_jamming plot   # figure (and its record) + table, from the committed "
+        "runs alone",
+        "```",
+        "",
+    )
+    out.table(HEADER, table_rows(rows))
+    return out
 
 
 def main() -> None:
@@ -190,6 +235,7 @@ def main() -> None:
     p_run.add_argument("--max-wall", type=float, default=1800.0)
     p_plot = sub.add_parser("plot")
     p_plot.add_argument("--phi", type=float, default=0.80)
+    p_plot.add_argument("--no-write", action="store_true", help="print the table, write no record")
     args = parser.parse_args()
     run(args) if args.command == "run" else plot(args)
 

@@ -70,17 +70,37 @@ def relaxed(snaps, eps: float, strain: float, every: int, rng):
     )
 
 
+def noisy_snapshots(snaps, level, optical_axis: str, rng):
+    """``snaps`` with Gaussian noise on every position, drawn from ``rng``: ``level`` is eps [a] per
+    coordinate, or for a 3D run a pair (eps, eps_axial), eps_axial along ``optical_axis`` (confocal)."""
+    import dataclasses
+
+    from rheograph.graphs.dataset import noise_scales
+    from rheograph.io.configurations import wrap_into_box, wrap_into_box3d
+
+    eps, eps_axial = level if isinstance(level, tuple) else (level, None)
+    noisy = snaps.positions + rng.normal(
+        0.0, noise_scales(eps, eps_axial, snaps.dim, optical_axis), snaps.positions.shape
+    )
+    if snaps.lz is None:
+        wrapped = [wrap_into_box(p, snaps.lx, snaps.ly, o) for p, o in zip(noisy, snaps.le_offset)]
+    else:
+        wrapped = [
+            wrap_into_box3d(p, snaps.lx, snaps.ly, snaps.lz, o) for p, o in zip(noisy, snaps.le_offset)
+        ]
+    return dataclasses.replace(
+        snaps, positions=np.stack(wrapped), contacts=None, position_noise=eps, axial_noise=eps_axial
+    )
+
+
 def fold_rows(
     run_dir: Path, k: int, noises, seed: int, cache_dir: Path, relax_strain: float = 0.0, relax_every: int = 4
 ) -> dict:
     """{(predictor, ε): (pred (G, 3), true (G, 3), groups (G,), jammed (G,), stress (G,))} for fold
-    ``k``."""
-    import dataclasses
-
+    ``k``; each ε of ``noises`` is eps [a] or, for 3D runs, a pair (eps, eps_axial) (``noisy_snapshots``)."""
     import torch
 
     from rheograph.graphs.dataset import SnapshotGraphDataset, snapshot_graphs
-    from rheograph.io.configurations import wrap_into_box
     from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.baselines import dataset_arrays, descriptor_trees, physics_rows
     from rheograph.learn.bundle import load_bundle, predict_dataset
@@ -105,16 +125,8 @@ def fold_rows(
         graphs = []
         for run in runs:
             snaps = read_snapshots(files[int(run)])
-            if eps:
-                noisy = snaps.positions + rng.normal(0.0, eps, snaps.positions.shape)
-                snaps = dataclasses.replace(
-                    snaps,
-                    positions=np.stack(
-                        [wrap_into_box(p, snaps.lx, snaps.ly, o) for p, o in zip(noisy, snaps.le_offset)]
-                    ),
-                    contacts=None,
-                    position_noise=eps,
-                )
+            if np.any(eps):
+                snaps = noisy_snapshots(snaps, eps, settings.optical_axis, rng)
             graphs += snapshot_graphs(snaps, settings, int(run))
         pred, true, meta = predict_dataset(module, graphs)
         groups = state_point_key(meta["phi"], meta["stress"])

@@ -1,10 +1,10 @@
 """The seed paper's Fig. 5 on held-out trajectories: R² of the three targets against φ for each system size,
 mean ± std over the 5 test folds, one model per (φ, N), with the paper's reported values beside ours.
 Each (φ, N) run keeps its report (Fig. 4 parity with ±15 % bands, Fig. 6 flow curves, MAE distributions)
-under docs/results/surrogate_per_phi/N<N>_phi<φ>/; the table replaces the ``surrogate_per_phi`` section of
-docs/validation/surrogate_accuracy.md; its record (docs/results/bench/surrogate_per_phi.json) keeps the
-numbers of the figure docs/figures/surrogate_r2_vs_phi.png too, drawn from it (as by ``python -m
-bench.render``).
+under docs/results/surrogate_per_phi/N<N>_phi<φ>/; the table is kept as the record of the
+``surrogate_per_phi`` section of docs/validation/surrogate_accuracy.md
+(docs/results/bench/surrogate_per_phi.json), which keeps the numbers of the figure
+docs/figures/surrogate_r2_vs_phi.png too (``python -m bench.render`` draws both from it).
 
     OMP_WAIT_POLICY=PASSIVE python -m bench.surrogate_per_phi --n 400 --phi 0.70 0.72 0.74 0.76 \\
         [--split grouped random] [--epochs 60] [extra train.py overrides after --]
@@ -28,16 +28,28 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
 
-from bench.publishing import publish
+from bench.figures import SCORES as TARGETS  # (key of a score, label) of the three targets
+from bench.publishing import Section, publish
 from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.io.index import read_index  # noqa: E402
 from rheograph.learn.train import run_stamps, stamps_differ  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-TARGETS = (("r2_log_eta", "log η_r"), ("r2_log_pressure", "log Π"), ("r2_z_mu", "Z_μ"))
 # the seed paper's text (random split, N = 2000 and 400): R² >~ 0.99 for every target at φ <= 0.76,
 # 0.90 / 0.93 / 0.95 (η_r / Π / Z_μ) at φ = 0.80; other values are only shown in its figures
 PAPER = {0.80: (0.90, 0.93, 0.95)}
+HEADER = (
+    "split",
+    "N",
+    "φ",
+    "R² log η_r",
+    "R² log Π",
+    "R² Z_μ",
+    "trees: log η_r / log Π / Z_μ",
+    "trees + solve & count: log η_r / log Π / Z_μ",
+    "paper",
+    "train min",
+)
 
 
 def main(argv=None) -> None:
@@ -105,6 +117,13 @@ def stats(folds: list[dict], key: str) -> tuple[float, float]:
     return float(np.nanmean(v)), float(np.nanstd(v, ddof=1))
 
 
+def baseline_cell(folds, name) -> str:
+    """A baseline's mean R² of the three targets, ``–`` where the run has not scored it."""
+    if f"baseline/{name}/r2_log_eta" not in folds[0]:
+        return "–"
+    return " / ".join(f"{stats(folds, f'baseline/{name}/{key}')[0]:.4f}" for key, _ in TARGETS)
+
+
 def figure_data(results: dict) -> dict:
     """The numbers :func:`bench.figures.draw_surrogate_r2_vs_phi` plots: per (split, N) the φ of its runs,
     the mean and std of the held-out R² of each target over the folds and, for the grouped split, the
@@ -135,13 +154,26 @@ def figure_data(results: dict) -> dict:
     }
 
 
-def write(results: dict, args) -> None:
-    def baseline_cell(folds, name):
-        if f"baseline/{name}/r2_log_eta" not in folds[0]:
-            return "–"
-        return " / ".join(f"{stats(folds, f'baseline/{name}/{key}')[0]:.4f}" for key, _ in TARGETS)
+def paper_cell(phi: float) -> str:
+    """The seed paper's reported R² at ``phi`` (its text gives ≳ 0.99 up to 0.76, numbers at 0.80)."""
+    paper = PAPER.get(round(phi, 2))
+    return " / ".join(f"{v:.2f}" for v in paper) if paper else ("≳ 0.99" if phi <= 0.76 else "–")
 
-    lines = [
+
+def run_row(split: str, n: int, phi: float, folds, minutes: float, stale: bool) -> list[str]:
+    """The published cells of one (split, N, φ) run from its folds' metrics and its training minutes."""
+    cells = [f"{m:.4f} ± {s:.4f}" for m, s in (stats(folds, f"test/{key}") for key, _ in TARGETS)]
+    return (
+        [split, f"{n}", f"{phi:.2f}{' †' if stale else ''}"]
+        + cells
+        + [baseline_cell(folds, "descriptors"), baseline_cell(folds, "descriptors_solve"), paper_cell(phi)]
+        + [f"{minutes:.1f}"]
+    )
+
+
+def section(results: dict, args) -> Section:
+    """The published section: the protocol, one row per (split, N, φ), the figure and the command."""
+    out = Section(
         "5 folds, "
         f"{args.epochs} epochs, batch 32 (N = 400) / 8 (N = 2000), default model (graph=physics_solve, "
         "model=resgcn_physics"
@@ -153,55 +185,52 @@ def write(results: dict, args) -> None:
         "paper's "
         "reported values (random split).",
         "",
-        "| split | N | φ | R² log η_r | R² log Π | R² Z_μ | trees: log η_r / log Π / Z_μ "
-        "| trees + solve & count: log η_r / log Π / Z_μ | paper | train min |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+    )
+    rows = [
+        run_row(split, n, phi, *results[(split, n, phi)])
+        for split, n in sorted({(s, n) for s, n, _ in results})
+        for phi in sorted(phi for s, m, phi in results if (s, m) == (split, n))
     ]
-    for split, n in sorted({(s, n) for s, n, _ in results}):
-        phis = sorted(phi for s, m, phi in results if (s, m) == (split, n))
-        for phi in phis:
-            folds, minutes, stale = results[(split, n, phi)]
-            cells = [f"{m:.4f} ± {s:.4f}" for m, s in (stats(folds, f"test/{key}") for key, _ in TARGETS)]
-            trees, solve_trees = (
-                baseline_cell(folds, "descriptors"),
-                baseline_cell(folds, "descriptors_solve"),
-            )
-            paper = PAPER.get(round(phi, 2))
-            paper_cell = (
-                " / ".join(f"{v:.2f}" for v in paper) if paper else ("≳ 0.99" if phi <= 0.76 else "–")
-            )
-            lines.append(
-                f"| {split} | {n} | {phi:.2f}{' †' if stale else ''} | "
-                + " | ".join(cells)
-                + f" | {trees} | {solve_trees} | {paper_cell} | {minutes:.1f} |"
-            )
+    out.table(HEADER, rows)
     if any(stale for _, _, stale in results.values()):
-        lines += [
+        out.add(
             "",
             "† trained by an earlier configuration of this command or on an earlier version of its "
             "data (the default model, the fold assignment or the trajectory files have changed since — "
             "the row's report in docs/results/surrogate_per_phi/ names its inputs), kept with "
             "`--keep-earlier` or `--report-only`; rerun without them to retrain.",
-        ]
-    lines += [
+        )
+    out.add(
         "",
         "![R² vs φ](../figures/surrogate_r2_vs_phi.png)",
         "",
         "Per-(φ, N) reports (parity, flow curves, MAE distributions): docs/results/surrogate_per_phi/.  "
-        "Command: `python -m bench.surrogate_per_phi --n "
+        f"Command: `{command(results, args)}`",
+    )
+    return out
+
+
+def command(results: dict, args) -> str:
+    """The command that reproduces the table: the (N, φ) it holds, the splits, epochs and overrides."""
+    return (
+        "python -m bench.surrogate_per_phi --n "
         + " ".join(str(n) for n in sorted({n for _, n, _ in results}))
         + " --phi "
         + " ".join(f"{p:g}" for p in sorted({p for _, _, p in results}))
         + f" --split {' '.join(args.split)} --epochs {args.epochs}"
         + (" -- " + " ".join(args.overrides) if args.overrides else "")
-        + "`",
-    ]
-    # the record keeps the figure's numbers too: publishing it draws docs/figures/surrogate_r2_vs_phi.png
+    )
+
+
+def write(results: dict, args) -> None:
+    """Keep the table and the figure's numbers as the section's record (which draws the page's section
+    and docs/figures/surrogate_r2_vs_phi.png)."""
     publish(
         "surrogate_per_phi",
-        "\n".join(lines),
+        section(results, args),
         write=not args.no_write,
         record={"figure": figure_data(results)},
+        command=command(results, args),
     )
 
 

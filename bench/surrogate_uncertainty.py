@@ -11,14 +11,14 @@ and the cross-validated error bar of the training run (rheograph.learn.error_mod
 held-out-trajectory residuals per state point).  Speed: wall
 seconds per predicted snapshot (graph building + 5 models) against the simulator's CPU seconds for one
 decorrelated snapshot (the runs' recorded CPU seconds per strain × the measured decorrelation strain).
-Replaces the ``surrogate_uncertainty`` section of docs/validation/surrogate_accuracy.md.
+Keeps the ``surrogate_uncertainty`` section of docs/validation/surrogate_accuracy.md as its record
+(``python -m bench.render`` draws it).
 """
 
 from __future__ import annotations
 
 import argparse
 import glob
-import json
 import os
 import shutil
 import time
@@ -28,7 +28,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
 
-from bench.publishing import publish
+from bench.publishing import Section, publish
 from bench.training import benchmark_config, train_or_resume  # noqa: E402
 from rheograph.analysis.dataset_card import cpu_seconds_per_decorrelated_snapshot  # noqa: E402
 from rheograph.io.snapshots import read_snapshots  # noqa: E402
@@ -38,6 +38,15 @@ from rheograph.learn.predict import Surrogate  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LABELS = {"eta": "η_r", "pressure": "Π", "z_mu": "Z_μ"}
+HEADER = (
+    "target",
+    "R² (ensemble mean)",
+    "R² log",
+    "ensemble spread: coverage ±1σ / ±2σ",
+    "median σ_ens / |error|",
+    "cross-validated error bar: coverage ±1 / ±2",
+    "median bar / |error|",
+)
 
 
 def main(argv=None) -> None:
@@ -77,51 +86,66 @@ def main(argv=None) -> None:
         sim_cost.append(cpu_seconds_per_decorrelated_snapshot(path))
     pred, std, true = np.concatenate(preds), np.concatenate(stds), np.concatenate(trues)
     err_bar = np.concatenate(errs)
-    per_snapshot = seconds / n_snapshots
-    finite = [c for c in sim_cost if np.isfinite(c)]
-    lines = [
+    rows = [
+        target_cells(name, pred[:, k], std[:, k], err_bar[:, k], true[:, k])
+        for k, name in enumerate(TARGET_NAMES)
+    ]
+    command = (
+        f"python -m bench.surrogate_uncertainty --phi {args.phi} --n {args.n} --train-seeds "
+        + " ".join(map(str, args.train_seeds))
+        + f" --test-seed {args.test_seed} --epochs {args.epochs}"
+    )
+    lead = (
         f"N = {args.n}, φ = {args.phi}: 5-fold ensemble trained on seeds {args.train_seeds} "
         f"({len(train_files)} trajectories, held-out-trajectory folds), tested on the {len(test_files)} "
         f"trajectories of seed {args.test_seed} ({len(pred)} snapshots at strain ≥ 1) that no model "
-        "has seen.",
-        "",
-        "| target | R² (ensemble mean) | R² log | ensemble spread: coverage ±1σ / ±2σ "
-        "| median σ_ens / |error| | cross-validated error bar: coverage ±1 / ±2 | median bar / |error| |",
-        "|---|---|---|---|---|---|---|",
+        "has seen."
+    )
+    finite = [c for c in sim_cost if np.isfinite(c)]
+    out = section(lead, rows, seconds / n_snapshots, float(np.median(finite)), command)
+    publish("surrogate_uncertainty", out, write=not args.no_write, command=command)
+
+
+def target_cells(name: str, pred, std, err_bar, true) -> list[str]:
+    """One target's published cells from the ensemble's predictions ``pred``, its spread ``std``, the
+    cross-validated error bar ``err_bar`` and the simulated values ``true`` (one per test snapshot)."""
+    err = np.abs(pred - true)
+    positive = (pred > 0) & (true > 0)
+    r2_log = r2_score(np.log10(pred[positive]), np.log10(true[positive])) if name != "z_mu" else float("nan")
+    ratio = np.median(std / np.maximum(err, 1e-12))
+    # the error bar lives in the scale the errors were modelled on (log10 for eta_r and Pi)
+    scaled_err = np.abs(error_scale(pred, name) - error_scale(true, name))
+    usable = np.isfinite(scaled_err)
+    bar, scaled_err = err_bar[usable], scaled_err[usable]
+    return [
+        LABELS[name],
+        f"{r2_score(pred, true):.3f}",
+        f"{r2_log:.3f}" if np.isfinite(r2_log) else "–",
+        f"{np.mean(err <= std):.2f} / {np.mean(err <= 2 * std):.2f}",
+        f"{ratio:.2f}",
+        f"{np.mean(scaled_err <= bar):.2f} / {np.mean(scaled_err <= 2 * bar):.2f}",
+        f"{np.median(bar / np.maximum(scaled_err, 1e-12)):.2f}",
     ]
-    for k, name in enumerate(TARGET_NAMES):
-        err = np.abs(pred[:, k] - true[:, k])
-        positive = (pred[:, k] > 0) & (true[:, k] > 0)
-        r2_log = (
-            r2_score(np.log10(pred[positive, k]), np.log10(true[positive, k]))
-            if name != "z_mu"
-            else float("nan")
-        )
-        ratio = np.median(std[:, k] / np.maximum(err, 1e-12))
-        # the error bar lives in the scale the errors were modelled on (log10 for eta_r and Pi)
-        scaled_err = np.abs(error_scale(pred[:, k], name) - error_scale(true[:, k], name))
-        usable = np.isfinite(scaled_err)
-        bar, scaled_err = err_bar[usable, k], scaled_err[usable]
-        lines.append(
-            f"| {LABELS[name]} | {r2_score(pred[:, k], true[:, k]):.3f} | "
-            + (f"{r2_log:.3f}" if np.isfinite(r2_log) else "–")
-            + f" | {np.mean(err <= std[:, k]):.2f} / {np.mean(err <= 2 * std[:, k]):.2f} | {ratio:.2f} | "
-            f"{np.mean(scaled_err <= bar):.2f} / {np.mean(scaled_err <= 2 * bar):.2f} | "
-            f"{np.median(bar / np.maximum(scaled_err, 1e-12)):.2f} |"
-        )
-    lines += [
+
+
+def section(
+    lead: str, rows: list[list[str]], per_snapshot: float, sim_seconds: float, command: str
+) -> Section:
+    """The published section: what was tested (``lead``), the coverage table, the speed-up of one
+    prediction (``per_snapshot`` wall s) over simulating a decorrelated snapshot (``sim_seconds`` CPU s)
+    and the command."""
+    out = Section(lead, "")
+    out.table(HEADER, rows)
+    out.add(
         "",
         f"Speed: {1e3 * per_snapshot:.1f} ms per snapshot (graph building + 5 models, one batched pass per "
-        f"file, this machine); the simulator spends {np.median(finite):.1f} CPU s per decorrelated snapshot "
+        f"file, this machine); the simulator spends {sim_seconds:.1f} CPU s per decorrelated snapshot "
         "(median over the test runs of recorded CPU s/strain × the 1/e decorrelation strain of log η_r): "
-        f"**{np.median(finite) / per_snapshot:.0f}×**.",
+        f"**{sim_seconds / per_snapshot:.0f}×**.",
         "",
-        f"Command: `python -m bench.surrogate_uncertainty --phi {args.phi} --n {args.n} --train-seeds "
-        + " ".join(map(str, args.train_seeds))
-        + f" --test-seed {args.test_seed} --epochs {args.epochs}`",
-    ]
-    (run_dir / "summary.json").write_text(json.dumps({"lines": lines}))
-    publish("surrogate_uncertainty", "\n".join(lines), write=not args.no_write)
+        f"Command: `{command}`",
+    )
+    return out
 
 
 if __name__ == "__main__":

@@ -40,3 +40,9 @@ def test_blocks_render_prose_verbatim_and_tables_cell_for_cell():
         render_blocks(blocks)
         == "Title\n\n| a | b |\n|---|--:|\n| 1 | |\n| x | 0.5 |\n\nCommand: `python -m bench.x`"
     )
+
+
+def test_an_indented_table_renders_inside_its_list_item():
+    blocks = [{"text": "* item"}, table_block(["a"], [[1]], indent="  ")]
+    assert render_blocks(blocks) == "* item\n  | a |\n  |---|\n  | 1 |"
+    assert "indent" not in table_block(["a"], [[1]])["table"]  # records without one keep their old form

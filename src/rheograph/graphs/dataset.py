@@ -53,6 +53,7 @@ TARGETS = ("viscosity", "pressure", "z_mu")
 # the step settings of the one-solve input (rheograph.graphs.features.solve_viscosity): numerics of the
 # model, recorded in its bundle, not of the snapshot
 SOLVE_NUMERICS = ("disp_max", "dt_max", "lagged_step_control")
+AXES = ("x", "y", "z")  # flow, gradient, vorticity
 log = logging.getLogger("rheograph.graphs")
 
 
@@ -82,6 +83,12 @@ class GraphSettings:
     # noise_range, seeded) built once into the cache — for inputs too costly to recompute each epoch
     # (the one-solve, relax_strain)
     noise_copies: int = 0
+    # 3D, confocal-grade positions: (eps_min, eps_max) [a] of the noise along the optical axis, drawn
+    # log-uniform independently of the in-plane eps of noise_range (which it needs); empty: isotropic
+    axial_noise_range: tuple = ()
+    # the microscope's optical axis in the flow frame (x flow, y gradient, z vorticity): y where a shear
+    # cell is imaged through its plate, as in rheo-confocal microscopy
+    optical_axis: str = "y"
     # > 0: every snapshot's positions are first sheared by this strain under the simulator's dynamics at
     # its imposed stress (rheograph.graphs.features.relax_positions: repairs the overlaps that imprecise
     # positions make), in training and in prediction alike
@@ -140,6 +147,23 @@ class GraphSettings:
                     "graph.noise_range: re-noised positions have no contact history; drop "
                     f"{sorted(set(self.edge_features) & set(HISTORY_EDGE_FEATURES))} from graph.edge_features"
                 )
+        if self.axial_noise_range:
+            low, high = (tuple(self.axial_noise_range) + (None, None))[:2]
+            if len(self.axial_noise_range) != 2 or not (0.0 < low <= high <= 1.0) or not self.noise_range:
+                raise InputError(
+                    f"graph.axial_noise_range={list(self.axial_noise_range)} is invalid: allowed "
+                    "[eps_min, eps_max] with 0 < eps_min <= eps_max <= 1 (units of a), beside the in-plane "
+                    "graph.noise_range"
+                )
+        if "axial_noise" in self.graph_inputs and not self.axial_noise_range:
+            raise InputError(
+                "graph.graph_inputs: axial_noise (the precision along the optical axis) needs "
+                "graph.axial_noise_range, the axial noise the model is trained on"
+            )
+        if self.optical_axis not in AXES:
+            raise InputError(
+                f"graph.optical_axis={self.optical_axis!r} is invalid: allowed one of {list(AXES)}"
+            )
         if isinstance(self.snapshot_every, bool) or not (
             isinstance(self.snapshot_every, int) and self.snapshot_every >= 1
         ):
@@ -234,6 +258,11 @@ def snapshot_graphs(
             f"{path}: the imposed stress (key stress, sigma/sigma0) is not given; this model reads it "
             "(a positions-only model, graph.stress_known=false, does not)"
         )
+    if (settings.axial_noise_range or "axial_noise" in settings.graph_inputs) and not three_d:
+        raise InputError(
+            f"{path}: a 2D snapshot has no optical axis; this model (graph.axial_noise_range, input "
+            "axial_noise) reads 3D confocal snapshots"
+        )
     if "position_noise" in settings.graph_inputs and snaps.position_noise is None:
         raise InputError(
             f"{path}: the model reads the positions' precision (position_noise, RMS per coordinate in "
@@ -271,12 +300,17 @@ def snapshot_graphs(
     solve_params = {**params, **{k: v for k, v in numerics.items() if k in SOLVE_NUMERICS}}
     # a noisy copy (noisy_copy) states one eps per snapshot, a source one for all
     noise = np.broadcast_to(np.nan_to_num(np.asarray(snaps.position_noise, dtype=np.float64)), (len(snaps),))
+    stated_axial = snaps.position_noise if snaps.axial_noise is None else snaps.axial_noise
+    axial = np.broadcast_to(np.nan_to_num(np.asarray(stated_axial, dtype=np.float64)), (len(snaps),))
+    coarsest = np.maximum(noise, axial)  # how close imprecise positions may bring two centres
     for idx in keep:
         where = f"{path}, snapshot {idx}"
         if three_d:
-            check_separations3d(where, snaps.positions[idx], radii, (*edges, snaps.le_offset[idx]))
+            check_separations3d(
+                where, snaps.positions[idx], radii, (*edges, snaps.le_offset[idx]), coarsest[idx]
+            )
         else:
-            check_separations(where, snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx])
+            check_separations(where, snaps.positions[idx], radii, lx, ly, snaps.le_offset[idx], coarsest[idx])
     if settings.relax_strain and "disp_max" not in solve_params:
         raise InputError(
             f"{path}: graph.relax_strain shears the snapshots under the simulator's dynamics, which "
@@ -287,6 +321,7 @@ def snapshot_graphs(
             "positions": snaps.positions[idx],
             "le_offset": float(snaps.le_offset[idx]),
             "position_noise": float(noise[idx]),
+            "axial_noise": float(axial[idx]),
             "contacts": contacts[k],
             "targets": snaps.targets[idx],
             "jammed": bool(snaps.jammed[idx]),
@@ -365,7 +400,7 @@ def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
                 (*edges, offset),
                 solve_params,
                 settings,
-                {"phi": phi, "position_noise": job["position_noise"]},
+                {"phi": phi, "position_noise": job["position_noise"], "axial_noise": job["axial_noise"]},
                 contacts=job["contacts"],
                 targets=job["targets"],
                 jammed=job["jammed"],
@@ -469,20 +504,43 @@ def snapshot_graph(
     )
 
 
-def noisy_copy(snaps: Snapshots, noise_range, seed) -> Snapshots:
+def noise_scales(eps: float, eps_axial: float | None, dim: int, optical_axis: str) -> float | np.ndarray:
+    """The RMS noise per coordinate [a]: ``eps`` on every axis, or in 3D ``eps_axial`` along
+    ``optical_axis`` (one of ``AXES``) and ``eps`` across it, a (3,) vector."""
+    if eps_axial is None:
+        return eps
+    scales = np.full(dim, eps)
+    scales[AXES.index(optical_axis)] = eps_axial
+    return scales
+
+
+def noisy_copy(snaps: Snapshots, noise_range, seed, axial_noise_range=(), optical_axis="y") -> Snapshots:
     """``snaps`` with Gaussian noise on every snapshot's positions, eps log-uniform in ``noise_range``
-    drawn per snapshot (``position_noise`` then holds the (S,) draws); ``seed`` seeds the draws."""
+    drawn per snapshot (``position_noise`` then holds the (S,) draws); with ``axial_noise_range`` (3D),
+    the noise along ``optical_axis`` is drawn apart, log-uniform in that range (``axial_noise``, (S,));
+    ``seed`` seeds the draws."""
+    if axial_noise_range and snaps.lz is None:
+        raise InputError(f"{snaps.source}: axial noise (graph.axial_noise_range) needs a 3D snapshot")
     rng = np.random.default_rng(seed)
     eps = np.exp(rng.uniform(*np.log(np.asarray(noise_range, dtype=np.float64)), len(snaps)))
+    axial = [None] * len(snaps)
+    if axial_noise_range:
+        axial = np.exp(rng.uniform(*np.log(np.asarray(axial_noise_range, dtype=np.float64)), len(snaps)))
     box = (snaps.lx, snaps.ly) if snaps.lz is None else (snaps.lx, snaps.ly, snaps.lz)
     wrap = wrap_into_box if snaps.lz is None else wrap_into_box3d
     positions = np.stack(
         [
-            wrap(p + rng.normal(0.0, e, p.shape), *box, o)
-            for p, e, o in zip(snaps.positions, eps, snaps.le_offset)
+            wrap(p + rng.normal(0.0, noise_scales(e, ea, snaps.dim, optical_axis), p.shape), *box, o)
+            for p, e, ea, o in zip(snaps.positions, eps, axial, snaps.le_offset)
         ]
     )
-    return dataclasses.replace(snaps, positions=positions, contacts=None, position_noise=eps)
+    return dataclasses.replace(
+        snaps,
+        positions=positions,
+        contacts=None,
+        position_noise=eps,
+        axial_noise=axial if axial_noise_range else None,
+    )
 
 
 class NoisyGraphs(torch.utils.data.Dataset):
@@ -498,6 +556,11 @@ class NoisyGraphs(torch.utils.data.Dataset):
         self.graphs, self.settings, self.run_params = graphs, settings, run_params
         self.fresh, self.seed = fresh, seed
         self.log_range = np.log(np.asarray(settings.noise_range, dtype=np.float64))
+        self.log_axial_range = (
+            np.log(np.asarray(settings.axial_noise_range, dtype=np.float64))
+            if settings.axial_noise_range
+            else None
+        )
 
     def __len__(self) -> int:
         return len(self.graphs)
@@ -509,25 +572,37 @@ class NoisyGraphs(torch.utils.data.Dataset):
         else:
             rng = np.random.default_rng([self.seed, k])
         eps = float(np.exp(rng.uniform(*self.log_range)))
-        return self.noisy(g, eps, rng)
+        eps_axial = (
+            None if self.log_axial_range is None else float(np.exp(rng.uniform(*self.log_axial_range)))
+        )
+        return self.noisy(g, eps, rng, eps_axial)
 
-    def noisy(self, g: Data, eps: float, rng: np.random.Generator) -> Data:
-        """``g`` rebuilt from its positions plus noise of ``eps`` [a] per coordinate."""
+    def noisy(self, g: Data, eps: float, rng: np.random.Generator, eps_axial: float | None = None) -> Data:
+        """``g`` rebuilt from its positions plus noise of ``eps`` [a] per coordinate (3D, with
+        ``eps_axial``: that along the optical axis instead)."""
         params = self.run_params[int(g.run_id)]
         radii = np.where(g.x[:, 1].numpy() > 0.5, float(params["size_ratio"]), 1.0)
         pos = g.pos.numpy().astype(np.float64)
         box = tuple(float(v) for v in g.box[0])  # (lx, ly, le_offset), 3D (lx, ly, lz, le_offset)
-        noisy = pos + rng.normal(0.0, eps, pos.shape)
+        noisy = pos + rng.normal(
+            0.0, noise_scales(eps, eps_axial, pos.shape[1], self.settings.optical_axis), pos.shape
+        )
         wrapped = wrap_into_box3d(noisy, *box) if len(box) == 4 else wrap_into_box(noisy, *box)
         inputs = self.settings.graph_inputs
         source_noise = float(g.u[0, inputs.index("position_noise")]) if "position_noise" in inputs else 0.0
+        source_axial = float(g.u[0, inputs.index("axial_noise")]) if "axial_noise" in inputs else source_noise
+        axial = eps if eps_axial is None else eps_axial
         return snapshot_graph(
             wrapped,
             radii,
             box,
             {**params, "stress": float(g.stress)},
             self.settings,
-            {"phi": float(g.phi), "position_noise": float(np.hypot(eps, source_noise))},
+            {
+                "phi": float(g.phi),
+                "position_noise": float(np.hypot(eps, source_noise)),
+                "axial_noise": float(np.hypot(axial, source_axial)),
+            },
             targets=g.y_raw[0].numpy(),
             jammed=bool(g.jammed),
             strain=float(g.strain),
@@ -615,6 +690,12 @@ class SnapshotGraphDataset(InMemoryDataset):
                         "pressure_on_spring",
                         # the cache holds the exact graphs; the noise is drawn when they are read
                         *(() if settings.noise_copies else ("noise_range",)),
+                        # isotropic noise: the keys of caches made before the axial noise stay valid
+                        *(
+                            ()
+                            if settings.noise_copies and settings.axial_noise_range
+                            else ("axial_noise_range", "optical_axis")
+                        ),
                     )
                 },
                 "files": _files_fingerprint(self.files),
@@ -709,6 +790,12 @@ class SnapshotGraphDataset(InMemoryDataset):
         log.info("noisy copies of %s (%d/%d)", path, run_id + 1, len(self.files))
         graphs = []
         for copy_id in range(self.settings.noise_copies):
-            noisy = noisy_copy(snaps, self.settings.noise_range, [run_id, copy_id])
+            noisy = noisy_copy(
+                snaps,
+                self.settings.noise_range,
+                [run_id, copy_id],
+                self.settings.axial_noise_range,
+                self.settings.optical_axis,
+            )
             graphs.extend(snapshot_graphs(noisy, self.settings, run_id))
         return graphs

@@ -75,7 +75,7 @@ def overlap_unit(kn_coefficient: float) -> float:
     return 6.0 * np.pi / kn_coefficient
 
 
-def check_separations(where: str, positions, radii, lx, ly, le_offset) -> None:
+def check_separations(where: str, positions, radii, lx, ly, le_offset, noise: float = 0.0) -> None:
     """Refuses a configuration (positions (N, 2) [a], wrapped) in which a particle's centre lies within
     another particle: centre distance r <= max(a_i, a_j), an overlap a_i + a_j - r of at least the
     smaller radius.  Pair forces along the line of centres (the contact springs, lubrication) describe
@@ -83,7 +83,8 @@ def check_separations(where: str, positions, radii, lx, ly, le_offset) -> None:
     paper-scale training set, 0.02 a in frictionless packings at jamming), and positions imprecise by
     0.05 a per coordinate (the imaging models' widest) make up to 0.28 a (measured: 21 snapshots at
     phi = 0.76, N = 400).  So this threshold catches only particles listed twice, positions in other
-    units or a broken file — whose solve would divide by a zero distance or predict from nonsense."""
+    units or a broken file — whose solve would divide by a zero distance or predict from nonsense.
+    ``noise`` [a]: the positions' stated precision (``refuse_centres_inside``)."""
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, le_offset, 0.0, 0.0)
     dx = positions[pair_j, 0] - positions[pair_i, 0]
     dy = positions[pair_j, 1] - positions[pair_i, 1]
@@ -91,14 +92,24 @@ def check_separations(where: str, positions, radii, lx, ly, le_offset) -> None:
     dy = dy - across * ly
     dx = dx - across * le_offset
     dx = dx - lx * np.floor(dx / lx + 0.5)
-    refuse_centres_inside(where, radii, pair_i, pair_j, np.hypot(dx, dy))
+    refuse_centres_inside(where, radii, pair_i, pair_j, np.hypot(dx, dy), noise)
 
 
-def refuse_centres_inside(where: str, radii, pair_i, pair_j, distance) -> None:
+# how far imprecise positions can bring two centres together: 5 standard deviations of the difference of
+# two displacements of RMS eps along the line of centres, sqrt(2) eps
+NOISE_REACH = 5.0 * np.sqrt(2.0)
+
+
+def refuse_centres_inside(where: str, radii, pair_i, pair_j, distance, noise: float = 0.0) -> None:
     """Raises InputError naming the worst listed pair (``pair_i``, ``pair_j``) (P,) whose centre
-    ``distance`` (P,) [a] is at most the larger radius (``check_separations``, either dimension)."""
+    ``distance`` (P,) [a] is at most the larger radius (``check_separations``, either dimension).  With
+    positions imprecise by ``noise`` [a] (RMS per coordinate, the coarsest axis), a touching pair may
+    appear up to NOISE_REACH x noise closer: the threshold drops to a_i + a_j - NOISE_REACH x noise where
+    that is lower (from noise ~0.14 a on; confocal depth precision of ~0.3 a can bring any two centres
+    together, and no check is left)."""
     larger = np.maximum(radii[pair_i], radii[pair_j])
-    inside = np.flatnonzero(distance <= larger)
+    threshold = np.minimum(larger, radii[pair_i] + radii[pair_j] - NOISE_REACH * noise)
+    inside = np.flatnonzero(distance <= threshold)
     if inside.size:
         k = inside[np.argmin(distance[inside] / larger[inside])]
         i, j = int(pair_i[k]), int(pair_j[k])
@@ -305,8 +316,9 @@ RELAXED_GRAPH_INPUTS = (
 SHELL_WIDTHS = (0.01, 0.03, 0.1, 0.3)
 SHELL_INPUTS = tuple(f"shell_{kind}_{w:g}" for w in SHELL_WIDTHS for kind in ("pairs", "fabric", "normal"))
 # known conditions of a snapshot: log(sigma/sigma0), phi, and the RMS position error per coordinate [a]
-# (0 for simulator output; an experimenter's tracking precision)
-KNOWN_GRAPH_INPUTS = ("log_stress", "phi", "position_noise")
+# (0 for simulator output; an experimenter's tracking precision), in 3D also the RMS error along the
+# microscope's optical axis (``axial_noise``: confocal tracking is several times coarser in depth)
+KNOWN_GRAPH_INPUTS = ("log_stress", "phi", "position_noise", "axial_noise")
 GRAPH_INPUTS = (*KNOWN_GRAPH_INPUTS, *COMPUTED_GRAPH_INPUTS, *RELAXED_GRAPH_INPUTS, *SHELL_INPUTS)
 
 

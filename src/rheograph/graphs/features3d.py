@@ -49,15 +49,16 @@ from rheograph.sim.stress3d import particle_pressure
 EDGE_FEATURES_3D_ONLY = ("nyy_nzz",)
 
 
-def check_separations3d(where: str, positions, radii, box3) -> None:
+def check_separations3d(where: str, positions, radii, box3, noise: float = 0.0) -> None:
     """``rheograph.graphs.features.check_separations`` in 3D: refuses a configuration (positions (N, 3)
-    [a], wrapped) in which a particle's centre lies within another particle."""
+    [a], wrapped) in which a particle's centre lies within another particle, by more than positions of
+    precision ``noise`` [a] explain."""
     lx, ly, lz, le_offset = box3
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     pair_i, pair_j = neighbour_pairs(positions, radii, lx, ly, lz, le_offset, 0.0, 0.0)
     _, distance, _, _ = pair_geometry(positions, radii, pair_i, pair_j, lx, ly, lz, le_offset)
-    refuse_centres_inside(where, radii, pair_i, pair_j, distance)
+    refuse_centres_inside(where, radii, pair_i, pair_j, distance, noise)
 
 
 def snapshot_pairs3d(positions, radii, box3, cutoff, params) -> dict:

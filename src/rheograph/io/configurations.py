@@ -49,7 +49,10 @@ class Snapshots:
     unknown); ``jammed`` (S,) bool (arrested packings, whose η_r is not a target); ``contacts``: per
     snapshot the recorded contact states (pairs, states, stretches) of a rheograph trajectory, else None;
     ``position_noise`` [a]: the stated precision of the positions, RMS per coordinate (0 for exact
-    simulator output; None where a bare file or a caller does not state it)."""
+    simulator output; None where a bare file or a caller does not state it); ``axial_noise`` [a]: in 3D,
+    the RMS precision along the microscope's optical axis where it differs from ``position_noise``
+    (confocal tracking locates particles several times less precisely in depth), which then holds the
+    in-plane precision; None: the same as ``position_noise``."""
 
     source: str
     kind: str
@@ -68,6 +71,7 @@ class Snapshots:
     contacts: list | None = None
     position_noise: float | None = 0.0
     status: str = ""
+    axial_noise: float | None = None
     lz: float | None = None
 
     @property

@@ -34,17 +34,19 @@ def replace_section(path: Path, name: str, body: str, insert_before: str | None 
     _write_atomically(path, text)
 
 
-def table_block(header, rows, align=None) -> dict:
+def table_block(header, rows, align=None, indent: str = "") -> dict:
     """A table of a section record: ``header`` (column names), ``rows`` (cells, formatted as they are to
-    be published) and ``align`` (each column's separator cell, ``---`` by default)."""
+    be published), ``align`` (each column's separator cell, ``---`` by default) and ``indent`` (spaces
+    before every line: a table inside a list item; kept in the record only where set)."""
     header = [str(h) for h in header]
-    return {
-        "table": {
-            "header": header,
-            "align": list(align) if align is not None else ["---"] * len(header),
-            "rows": [[str(c) for c in row] for row in rows],
-        }
+    table = {
+        "header": header,
+        "align": list(align) if align is not None else ["---"] * len(header),
+        "rows": [[str(c) for c in row] for row in rows],
     }
+    if indent:
+        table["indent"] = indent
+    return {"table": table}
 
 
 def render_blocks(blocks: list[dict]) -> str:
@@ -57,8 +59,8 @@ def _render_block(block: dict) -> str:
     if "text" in block:
         return block["text"]
     t = block["table"]
-    lines = [_row(t["header"]), "|" + "|".join(t["align"]) + "|"]
-    return "\n".join(lines + [_row(row) for row in t["rows"]])
+    lines = [_row(t["header"]), "|" + "|".join(t["align"]) + "|"] + [_row(row) for row in t["rows"]]
+    return "\n".join(t.get("indent", "") + line for line in lines)
 
 
 def _row(cells) -> str:

@@ -12,7 +12,9 @@ Three kinds of source (``read_snapshots`` tells them apart by their content and 
   physical parameters ``PHYSICAL_PARAMS`` named as the ``sim.*`` keys; optional ``strain``, ``eta_r``,
   ``pressure``, ``z_mu`` (S,), ``position_noise`` [a] and ``disp_max``.  A 3D one has positions
   (S, N, 3) or (N, 3) (x flow, y gradient, z vorticity), ``box`` (3,) = (Lx, Ly, Lz) and ``phi`` the
-  volume fraction; its optional ``dim`` (2 or 3) must agree;
+  volume fraction; its optional ``dim`` (2 or 3) must agree; its optional ``axial_noise`` [a] is the
+  precision along a confocal microscope's optical axis (the model's ``graph.optical_axis``), with
+  ``position_noise`` then the in-plane one;
 * an **LF_DEM run**: its ``par_*.dat`` (plain or ``.gz``), see ``rheograph.io.lfdem``.
 
 Positions are wrapped into rheograph's box [-Lx/2, Lx/2) x [-Ly/2, Ly/2) with the Lees–Edwards images
@@ -66,7 +68,7 @@ BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_ga
 # the step a source was made with, are recorded by write_bare beside disp_max
 BARE_KEYS = (
     "positions", "radii", "box", "le_offset", "stress", "phi", *PHYSICAL_PARAMS, "strain", *TARGET_KEYS,
-    "position_noise", "disp_max", "dt_max", "lagged_step_control", "dim",
+    "position_noise", "axial_noise", "disp_max", "dt_max", "lagged_step_control", "dim",
 )  # fmt: skip
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
@@ -329,6 +331,12 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     noise = _scalar(values, "position_noise", where) if values.get("position_noise") is not None else None
     if noise is not None and noise < 0:
         raise InputError(f"{where}: position_noise = {noise:g} must be >= 0 (units of a)")
+    axial = _scalar(values, "axial_noise", where) if values.get("axial_noise") is not None else None
+    if axial is not None and (axial < 0 or lz is None or noise is None):
+        raise InputError(
+            f"{where}: axial_noise = {axial:g} is the precision along the optical axis of a 3D snapshot, "
+            "beside its in-plane position_noise: allowed >= 0 (units of a), with position_noise, in 3D"
+        )
     numerics = {"disp_max": _scalar(values, "disp_max", where)} if "disp_max" in values else {}
     return Snapshots(
         source=where,
@@ -352,6 +360,7 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         numerics=numerics,
         position_noise=noise,
         lz=lz,
+        axial_noise=axial,
     )
 
 
@@ -366,6 +375,7 @@ def write_bare(path: str | Path, snapshots: Snapshots) -> None:
         "phi": snapshots.phi,
         "strain": snapshots.strain,
         **({} if snapshots.position_noise is None else {"position_noise": snapshots.position_noise}),
+        **({} if snapshots.axial_noise is None else {"axial_noise": snapshots.axial_noise}),
         **{k: v for k, v in snapshots.params.items()},
         **{key: snapshots.targets[:, k] for k, key in enumerate(TARGET_KEYS)},
         **snapshots.numerics,

@@ -61,6 +61,7 @@ def save_bundle(path: Path, module, settings: GraphSettings, fold: int, split: s
                 "edge_features": list(settings.edge_features),
                 "graph_inputs": list(settings.graph_inputs),
                 "noise_range": list(settings.noise_range),
+                "axial_noise_range": list(settings.axial_noise_range),
             },
             "fold": fold,
             "split": split,
@@ -137,6 +138,7 @@ def bundle_graph_settings(bundle: dict) -> GraphSettings:
     graph["edge_features"] = tuple(graph["edge_features"])
     graph["graph_inputs"] = tuple(graph.get("graph_inputs", ()))
     graph["noise_range"] = tuple(graph.get("noise_range", ()))
+    graph["axial_noise_range"] = tuple(graph.get("axial_noise_range", ()))
     graph["targets"] = spec_of_record(graph)
     return GraphSettings(**{k: v for k, v in graph.items() if k not in LEGACY_GRAPH_KEYS})
 

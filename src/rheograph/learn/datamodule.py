@@ -225,7 +225,11 @@ class SnapshotDataModule(L.LightningDataModule):
             # the trained range of the features reaches what the largest trained noise makes
             loudest = NoisyGraphs(
                 dataset[torch.as_tensor(self.train_idx)],
-                dataclasses.replace(self.graph, noise_range=(self.graph.noise_range[1],) * 2),
+                dataclasses.replace(
+                    self.graph,
+                    noise_range=(self.graph.noise_range[1],) * 2,
+                    axial_noise_range=self.graph.axial_noise_range[1:] * 2,
+                ),
                 self.run_params,
                 fresh=False,
                 seed=self.split_seed + 1,
@@ -250,6 +254,8 @@ class SnapshotDataModule(L.LightningDataModule):
             ),
             # the position noise the model was trained on [a] (predict.py flags a snapshot beyond it)
             "position_noise": list(self.graph.noise_range) if self.graph.noise_range else 0.0,
+            # 3D confocal training: the noise along the optical axis [a] (graph.optical_axis)
+            **({"axial_noise": list(self.graph.axial_noise_range)} if self.graph.axial_noise_range else {}),
             # the suspension a snapshot must match, and the step of the one-solve input (predict.py)
             **suspension_record(self.files, self.lfdem_params),
         }

@@ -155,6 +155,16 @@ def domain_report(
     if snaps.n_particles not in domain["n_particles"]:
         reasons.append(f"N = {snaps.n_particles} not among the trained N {domain['n_particles']}")
     noise = snaps.position_noise or 0.0
+    axial = noise if snaps.axial_noise is None else snaps.axial_noise
+    if "axial_noise" in domain:  # a confocal model: the axial precision has a trained range of its own
+        high_axial = float(domain["axial_noise"][1])
+        if axial > high_axial:
+            reasons.append(
+                f"positions known to {axial:.2g} a along the optical axis ({settings.optical_axis}), beyond "
+                f"the {high_axial:g} a of the model's noisy training"
+            )
+    else:  # trained on isotropic noise (or none): the coarsest axis decides
+        noise = max(noise, axial)
     elsewhere = [r for r in reasons if r.startswith(("phi", "N ="))]
     if elsewhere:  # name the shipped models whose domain holds this snapshot's (phi, N) and precision
         others = models_for_noise(snaps.phi, snaps.n_particles, noise)
@@ -447,6 +457,7 @@ class Surrogate:
         *,
         strain=None,
         position_noise: float | None = None,
+        axial_noise: float | None = None,
         eta_r=None,
         pressure=None,
         z_mu=None,
@@ -461,8 +472,10 @@ class Surrogate:
         ``kn_coefficient``, ``kt_ratio``, ``delta``,
         ``lub_max_gap``).  Optional: ``strain`` and the true ``eta_r``, ``pressure``, ``z_mu`` (S,) for the
         ``*_sim`` columns; ``position_noise`` [a], the positions' RMS precision per coordinate (an
-        imaging model needs it; exact models take unstated positions as exact).  Returns one row per
-        configuration as a dict of columns (``pandas.DataFrame(table)`` makes a data frame)."""
+        imaging model needs it; exact models take unstated positions as exact) and, for a 3D snapshot
+        from a confocal microscope, ``axial_noise`` [a], the precision along the optical axis where it
+        differs (the model card names the axis; ``position_noise`` is then the in-plane one).  Returns
+        one row per configuration as a dict of columns (``pandas.DataFrame(table)`` makes a data frame)."""
         unknown = sorted(set(params) - set(PHYSICAL_PARAMS))
         if unknown:
             raise InputError(
@@ -477,6 +490,7 @@ class Surrogate:
             "stress": stress,
             "phi": phi,
             "position_noise": position_noise,
+            "axial_noise": axial_noise,
             **params,
         }
         for key, value in (("strain", strain), ("eta_r", eta_r), ("pressure", pressure), ("z_mu", z_mu)):
@@ -547,6 +561,13 @@ def main(argv=None) -> None:
         help="RMS precision of the input positions per coordinate [a] (overrides what the inputs state)",
     )
     ap.add_argument(
+        "--axial-noise",
+        type=float,
+        metavar="EPS",
+        help="3D: RMS precision along the microscope's optical axis [a] where it differs from "
+        "--position-noise, then the in-plane one (the model card names the axis)",
+    )
+    ap.add_argument(
         "--accept-mismatch",
         action="store_true",
         help="predict for inputs of another suspension than the model's (flagged out of domain)",
@@ -580,6 +601,8 @@ def main(argv=None) -> None:
         math.isfinite(args.position_noise) and args.position_noise >= 0
     ):
         raise InputError(f"--position-noise {args.position_noise:g}: an RMS precision in units of a, >= 0")
+    if args.axial_noise is not None and not (math.isfinite(args.axial_noise) and args.axial_noise >= 0):
+        raise InputError(f"--axial-noise {args.axial_noise:g}: an RMS precision in units of a, >= 0")
     out = Path(args.out)
     if out.suffix not in (".csv", ".h5") or not out.parent.is_dir():
         raise InputError(f"--out {out}: must be a .csv or .h5 file in an existing directory")
@@ -593,11 +616,21 @@ def main(argv=None) -> None:
         snaps = read_snapshots(path, args.lfdem_params, given)
         if args.position_noise is not None:
             snaps.position_noise = args.position_noise
+        if args.axial_noise is not None:
+            if snaps.dim != 3 or snaps.position_noise is None:
+                what = "a 2D snapshot" if snaps.dim != 3 else "without position_noise"
+                raise InputError(
+                    f"--axial-noise: {path} is {what}; the axial precision is that of a 3D snapshot, "
+                    "beside its in-plane --position-noise"
+                )
+            snaps.axial_noise = args.axial_noise
         tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
     table = concatenate(tables)
     header = {"model": model.label, "inputs": " ".join(args.input)}
     if args.position_noise is not None:
         header["position_noise"] = f"{args.position_noise:g}"
+    if args.axial_noise is not None:
+        header["axial_noise"] = f"{args.axial_noise:g}"
     if given:
         header["parameters given"] = ", ".join(f"{k}={v:g}" for k, v in given.items())
     if args.accept_mismatch:

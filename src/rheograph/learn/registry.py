@@ -80,10 +80,12 @@ def read_card(paths: list[Path]) -> dict | None:
         and _finite_numbers(domain.get("stress"), 2)
         and _finite_numbers(domain.get("n_particles"))
         and (_finite_numbers([noise]) or _finite_numbers(noise, 2))
+        and ("axial_noise" not in card or _finite_numbers(card["axial_noise"], 2))
     ):
         raise InputError(
             f"{path}: not a model card: it needs domain.phi and domain.stress (two numbers each), "
-            "domain.n_particles (a list) and position_noise (a number or two); is the model folder damaged?"
+            "domain.n_particles (a list) and position_noise (a number or two; axial_noise, where present, "
+            "two); is the model folder damaged?"
         )
     return card
 
@@ -156,6 +158,7 @@ def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_di
         "physical_params": domain["physical_params"],
         "solve_numerics": domain["solve_numerics"],
         "position_noise": domain.get("position_noise", 0.0),
+        **({"axial_noise": domain["axial_noise"]} if "axial_noise" in domain else {}),
         # another network than SurrogateModule's own: its class must be registered where the model is used
         "module_class": bundle.get("module_class"),
         "on_state_mean": bool(bundle["hyper_parameters"].get("on_state_mean", False)),
@@ -168,6 +171,13 @@ def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_di
 
 def _noise_text(card: dict) -> str:
     noise = card["position_noise"]
+    if "axial_noise" in card:
+        axial, axis = card["axial_noise"], card["graph"].get("optical_axis", "y")
+        return (
+            f"trained on confocal-grade positions: Gaussian noise of {noise[0]:g}–{noise[1]:g} a per "
+            f"coordinate across the optical axis ({axis}) and {axial[0]:g}–{axial[1]:g} a along it, each "
+            "log-uniform: beyond either range a snapshot is flagged."
+        )
     if isinstance(noise, list):
         return (
             f"trained on positions with Gaussian noise of {noise[0]:g}–{noise[1]:g} a per coordinate "
@@ -232,6 +242,12 @@ def card_markdown(card: dict) -> str:
         lines.append(
             "* The positions' RMS precision `position_noise` (a) is an input: a snapshot must state it "
             "(file key, `predict.py --position-noise`, or `position_noise=` in `model.predict`)."
+        )
+    if "axial_noise" in graph["graph_inputs"]:
+        lines.append(
+            f"* So is the precision along the optical axis ({graph.get('optical_axis', 'y')}) `axial_noise` "
+            "(a), `position_noise` then being the in-plane one (file key, `predict.py --axial-noise`, or "
+            "`axial_noise=` in `model.predict`)."
         )
     if graph.get("stress_known", True) is False:
         lines.append(

@@ -78,6 +78,7 @@ def graph_settings(cfg: DictConfig) -> GraphSettings:
     values["edge_features"] = tuple(values["edge_features"])
     values["graph_inputs"] = tuple(values.get("graph_inputs", ()))
     values["noise_range"] = tuple(values.get("noise_range", ()))
+    values["axial_noise_range"] = tuple(values.get("axial_noise_range", ()))
     values["targets"] = TargetSpec.from_config(values.get("targets"))
     return GraphSettings(**values)
 
@@ -417,6 +418,8 @@ NEUTRAL_LATER_OPTIONS = (
     ("graph", "viscosity_on_relaxed", False),
     ("graph", "noise_range", []),
     ("graph", "noise_copies", 0),
+    ("graph", "axial_noise_range", []),
+    ("graph", "optical_axis", "y"),
     ("graph", "relax_strain", 0.0),
     ("graph", "stress_known", True),
     ("model", "on_state_mean", False),

@@ -1,0 +1,45 @@
+"""What a clone carries: the tracked files stay within the size a researcher downloads without thinking
+twice, the shipped models stay small, and run directories under docs/results keep reports, metrics and
+predictions, never weights, event files or databases (the published numbers are re-read from those)."""
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CHECKOUT_LIMIT_BYTES = 320_000_000  # the training data included
+SHIPPED_MODELS_LIMIT_BYTES = 15_000_000
+NOT_IN_RESULTS = (".pt", ".ckpt", ".db", ".sqlite", ".pkl", ".pickle")
+
+
+def tracked_files() -> list[Path]:
+    try:
+        listed = subprocess.run(
+            ["git", "-C", str(ROOT), "ls-files", "-z"], capture_output=True, check=True
+        ).stdout
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout")
+    return [ROOT / name for name in listed.decode().split("\0") if name]
+
+
+def test_the_checkout_stays_within_its_size():
+    files = tracked_files()
+    total = sum(f.stat().st_size for f in files if f.is_file())
+    assert total <= CHECKOUT_LIMIT_BYTES, f"tracked files {total / 1e6:.1f} MB"
+
+
+def test_the_shipped_models_stay_small():
+    models = ROOT / "src" / "rheograph" / "models"
+    total = sum(f.stat().st_size for f in tracked_files() if models in f.parents and f.is_file())
+    assert 0 < total <= SHIPPED_MODELS_LIMIT_BYTES, f"shipped models {total / 1e6:.1f} MB"
+
+
+def test_results_hold_no_weights_event_files_or_databases():
+    results = ROOT / "docs" / "results"
+    heavy = [
+        f.relative_to(ROOT).as_posix()
+        for f in tracked_files()
+        if results in f.parents and (f.suffix in NOT_IN_RESULTS or f.name.startswith("events.out.tfevents"))
+    ]
+    assert heavy == []
