@@ -11,12 +11,15 @@ snapshots are given to the models with what an experiment knows instead of the t
 * ``species known``: each particle's species (a dye, or the sample's recipe) and the nominal radii 1 and
   1.4 — the species as the simulation drew them;
 * ``species by size``: the species of a particle from its own (measured) radius against the geometric
-  mean of the two nominal radii, then the nominal radius — misassigns the tails of a wide spread.
+  mean of the two nominal radii, then the nominal radius — misassigns the tails of a wide spread;
+* ``radii estimated``: the species known, and each snapshot's radii estimated from its configuration
+  (``rheograph.graphs.radii_estimate``: near pairs' distances by least squares, scaled to the stated φ).
 
 The exact models read the gaps the nominal radii make (overlaps of order p a between touching
 particles); the imaging models are told a position precision ``--declared-noise`` [a] and relax the
-configuration before reading it.  With the true radii the models refuse the snapshot (their one-hot
-radius input has no other sizes): that row states the refusal.  Scores: R² of log10 η_r, log10 Π and Z_μ
+configuration before reading it.  With the true radii (or estimated ones) the models read each
+particle's species from its size and everything else from the radii themselves, and flag the snapshot
+(trained on two exact radii).  Scores: R² of log10 η_r, log10 Π and Z_μ
 over the snapshots at strain >= ``--min-strain`` of all runs of one spread; the lookup row is the mean of
 the bidisperse training runs at each σ (``--lookup``), which reads no positions.  The table replaces the
 marked section ``unknown_radii`` of docs/imaging.md unless ``--no-write``; its numbers are kept in
@@ -49,9 +52,25 @@ def nominal_radii(radii: np.ndarray, n_small: int, how: str) -> np.ndarray:
     return np.where(small, NOMINAL[0], NOMINAL[1])
 
 
-def predict(model, snaps, keep) -> tuple[np.ndarray, np.ndarray, float]:
-    """(predictions (S, 3), the simulator's values (S, 3), share in domain) at the kept snapshots."""
-    table = model.predict_snapshots(snaps)
+def predict(model, snaps, keep, estimate: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+    """(predictions (S, 3), the simulator's values (S, 3), share in domain) at the kept snapshots;
+    ``estimate``: each snapshot's radii estimated from its configuration first."""
+    if estimate:
+        import dataclasses
+
+        kept = np.flatnonzero(keep)
+        snaps = dataclasses.replace(
+            snaps,
+            positions=snaps.positions[kept],
+            le_offset=snaps.le_offset[kept],
+            strain=snaps.strain[kept],
+            targets=snaps.targets[kept],
+            jammed=snaps.jammed[kept],
+        )
+        keep = np.ones(kept.size, dtype=bool)
+        table = model.predict_with_estimated_radii(snaps)
+    else:
+        table = model.predict_snapshots(snaps)
     pred = np.stack([table[f"{t}_pred"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]
     sim = np.stack([table[f"{t}_sim"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]
     return pred, sim, float(np.mean(table["in_domain"][keep]))
@@ -99,7 +118,7 @@ def main(argv=None) -> int:
     for spread, runs in sorted(by_spread.items()):
         rows = {}
         truth, looked_up = [], []  # the simulator's values and the lookup's, snapshot by snapshot
-        for how in ("true radii", "species known", "species by size"):
+        for how in ("true radii", "species known", "species by size", "radii estimated"):
             for name, model in models.items():
                 preds, sims, shares = [], [], []
                 refused = None
@@ -107,11 +126,12 @@ def main(argv=None) -> int:
                     keep = snaps.strain >= args.min_strain
                     given = snaps
                     if how != "true radii":
-                        given = _with_radii(snaps, nominal_radii(snaps.radii, n_small, how))
+                        species = "species known" if how == "radii estimated" else how
+                        given = _with_radii(snaps, nominal_radii(snaps.radii, n_small, species))
                         if "imaging" in name:
                             given.position_noise = args.declared_noise
                     try:
-                        pred, sim, share = predict(model, given, keep)
+                        pred, sim, share = predict(model, given, keep, estimate=how == "radii estimated")
                     except InputError as exc:
                         refused = str(exc).split(":", 1)[-1].split("(found")[0].strip()
                         break

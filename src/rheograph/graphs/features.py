@@ -266,16 +266,26 @@ def snapshot_descriptors(pairs: dict, n_particles: int, area: float) -> np.ndarr
 NODE_FEATURES = 2  # columns of node_features: the one-hot radius
 
 
+# how far a radius may lie from its species' size (relative) for the one-hot species input: real
+# particles and estimated radii (rheograph.graphs.radii_estimate) spread by up to ~20 % about their species
+SPECIES_BAND = 0.3
+
+
 def node_features(radii, size_ratio):
-    """One-hot (N, 2): column 0 small (a = 1), column 1 large (a = size_ratio)."""
-    large = np.isclose(radii, size_ratio)
-    small = np.isclose(radii, 1.0)
-    if not np.all(large | small):
+    """One-hot species (N, 2): column 0 small (a = 1), column 1 large (a = size_ratio), each radius
+    assigned to the species nearer on a log scale (radii spread about their species' size, such as a
+    polydisperse sample's or estimated ones, keep their species; the edges and physics inputs read the
+    radii themselves).  A radius farther than SPECIES_BAND from both sizes is refused."""
+    radii = np.asarray(radii, dtype=np.float64)
+    large = radii > np.sqrt(size_ratio)
+    nearest = np.where(large, size_ratio, 1.0)
+    outside = np.abs(radii / nearest - 1.0) > SPECIES_BAND
+    if np.any(outside):
         raise InputError(
-            f"radii must be 1 or size_ratio={size_ratio} for the one-hot node features "
-            f"(found {np.unique(np.round(radii[~(large | small)], 6))[:5].tolist()})"
+            f"radii must lie within {SPECIES_BAND:.0%} of 1 or size_ratio={size_ratio} for the one-hot "
+            f"species input (found {np.unique(np.round(radii[outside], 6))[:5].tolist()})"
         )
-    return np.stack([small, large], axis=1).astype(np.float32)
+    return np.stack([~large, large], axis=1).astype(np.float32)
 
 
 # ---- graph-level inputs ---------------------------------------------------------------------------

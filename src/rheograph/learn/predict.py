@@ -53,6 +53,7 @@ import torch
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
+from rheograph.graphs.radii_estimate import snapshots_with_estimated_radii, species_spread
 from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values
 from rheograph.io.tables import write_table
@@ -154,6 +155,12 @@ def domain_report(
             reasons.append(f"{key} = {value:g} outside the trained [{low:g}, {high:g}]")
     if snaps.n_particles not in domain["n_particles"]:
         reasons.append(f"N = {snaps.n_particles} not among the trained N {domain['n_particles']}")
+    spread = species_spread(snaps.radii, float(domain.get("size_ratio", [1.4])[0]))
+    if spread > 1e-6:
+        reasons.append(
+            f"radii spread about the two species' sizes ({spread:.1%} RMS): the model was trained on exactly "
+            "two radii"
+        )
     noise = snaps.position_noise or 0.0
     axial = noise if snaps.axial_noise is None else snaps.axial_noise
     if "axial_noise" in domain:  # a confocal model: the axial precision has a trained range of its own
@@ -212,6 +219,7 @@ def domain_report(
 
 
 DEVICES = ("cpu", "cuda", "auto")
+RADII_CHOICES = ("given", "estimated", "estimated-mean")  # predict.py --radii
 # nodes per forward pass of the prediction batches: many snapshots in one pass (1310 of N = 400), few
 # enough that the network's activations stay within a few hundred MB on any device
 PREDICT_NODE_BUDGET = 2**19
@@ -324,6 +332,19 @@ class Surrogate:
                 "(flagged out of domain)"
             )
         return [f"accepted parameter mismatch: {text}"]
+
+    def predict_with_estimated_radii(
+        self, snaps: Snapshots, mean: bool = False, accept_mismatch: bool = False
+    ) -> dict:
+        """``predict_snapshots`` on ``snaps`` whose radii are the species' nominal ones (a sample whose
+        particles spread in size unmeasured), each snapshot with radii estimated from its configuration
+        (``rheograph.graphs.radii_estimate``); ``mean``: one estimate, the mean over the snapshots (the
+        same particles in the same order in each).  The model flags radii that spread about the two
+        species: what it makes of them is measured, not trained (docs/imaging.md, unknown sizes)."""
+        parts = snapshots_with_estimated_radii(snaps, mean)
+        table = concatenate([self.predict_snapshots(part, accept_mismatch) for part in parts])
+        table["snapshot"] = np.arange(len(table["snapshot"]))
+        return table
 
     def predict_snapshots(self, snaps: Snapshots, accept_mismatch: bool = False) -> dict:
         """One row per snapshot of ``snaps``: a dict of (S,) columns (module docstring)."""
@@ -568,6 +589,14 @@ def main(argv=None) -> None:
         "--position-noise, then the in-plane one (the model card names the axis)",
     )
     ap.add_argument(
+        "--radii",
+        choices=RADII_CHOICES,
+        default="given",
+        help="given (default): the inputs' radii; estimated: the inputs' radii are the species' nominal ones "
+        "and each snapshot's are estimated from its configuration (particles spread in size, unmeasured); "
+        "estimated-mean: one estimate, the mean over a file's snapshots (the same particles in each)",
+    )
+    ap.add_argument(
         "--accept-mismatch",
         action="store_true",
         help="predict for inputs of another suspension than the model's (flagged out of domain)",
@@ -624,13 +653,19 @@ def main(argv=None) -> None:
                     "beside its in-plane --position-noise"
                 )
             snaps.axial_noise = args.axial_noise
-        tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
+        if args.radii == "given":
+            tables.append(model.predict_snapshots(snaps, args.accept_mismatch))
+        else:
+            mean = args.radii == "estimated-mean"
+            tables.append(model.predict_with_estimated_radii(snaps, mean, args.accept_mismatch))
     table = concatenate(tables)
     header = {"model": model.label, "inputs": " ".join(args.input)}
     if args.position_noise is not None:
         header["position_noise"] = f"{args.position_noise:g}"
     if args.axial_noise is not None:
         header["axial_noise"] = f"{args.axial_noise:g}"
+    if args.radii != "given":
+        header["radii"] = args.radii
     if given:
         header["parameters given"] = ", ".join(f"{k}={v:g}" for k, v in given.items())
     if args.accept_mismatch:
