@@ -39,6 +39,7 @@ from bench.publishing import command_line, publish, table
 from rheograph.errors import InputError
 
 NOMINAL = (1.0, 1.4)
+MODES = ("true radii", "species known", "species by size", "radii estimated")  # what the models are given
 
 
 def nominal_radii(radii: np.ndarray, n_small: int, how: str) -> np.ndarray:
@@ -87,6 +88,11 @@ def main(argv=None) -> int:
     ap.add_argument("--declared-noise", type=float, default=0.05, help="told to the imaging models [a]")
     ap.add_argument("--lookup", nargs="+", default=[], help="bidisperse trajectories at the same φ and N")
     ap.add_argument("--min-strain", type=float, default=1.0)
+    ap.add_argument(
+        "--radii", nargs="+", choices=MODES, default=list(MODES), help="what the models are given"
+    )
+    ap.add_argument("--section", default="unknown_radii", help="the marked section of docs/imaging.md")
+    ap.add_argument("--title", default="Surrogates on polydisperse suspensions whose radii are unknown")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     files = sorted({f for pattern in args.runs for f in glob.glob(pattern)})
@@ -107,7 +113,7 @@ def main(argv=None) -> int:
 
     record: dict = {"command": command_line("unknown_radii", argv), "spreads": {}}
     lines = [
-        "### Surrogates on polydisperse suspensions whose radii are unknown",
+        f"### {args.title}",
         "",
         f"N = 400, φ = 0.76; snapshots at strain ≥ {args.min_strain:g} of runs with each species' radii "
         "spread Gaussian (relative spread p, truncated at 2p); R² log η_r / log Π / Z_μ over all runs of "
@@ -118,7 +124,7 @@ def main(argv=None) -> int:
     for spread, runs in sorted(by_spread.items()):
         rows = {}
         truth, looked_up = [], []  # the simulator's values and the lookup's, snapshot by snapshot
-        for how in ("true radii", "species known", "species by size", "radii estimated"):
+        for how in args.radii:
             for name, model in models.items():
                 preds, sims, shares = [], [], []
                 refused = None
@@ -175,7 +181,7 @@ def main(argv=None) -> int:
         record["spreads"][str(spread)] = rows
     header = ["p", "radii given", "model", "R² log η_r", "R² log Π", "R² Z_μ", "in domain"]
     lines += [table(header, body), f"\nCommand: `{record['command']}`"]
-    publish("unknown_radii", lines, not args.no_write, page="imaging.md", record=record)
+    publish(args.section, lines, not args.no_write, page="imaging.md", record=record)
     return 0
 
 
