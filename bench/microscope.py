@@ -21,6 +21,7 @@ only.  Writes docs/results/microscope/<name>.json and .md and the record of the 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -66,17 +67,7 @@ def tracking_record(tracked, snaps, k: int) -> dict:
 
 
 def one_snapshot(snaps, k: int) -> object:
-    import dataclasses
-
-    return dataclasses.replace(
-        snaps,
-        positions=snaps.positions[k : k + 1],
-        le_offset=snaps.le_offset[k : k + 1],
-        strain=snaps.strain[k : k + 1],
-        targets=snaps.targets[k : k + 1],
-        jammed=snaps.jammed[k : k + 1],
-        contacts=None,
-    )
+    return dataclasses.replace(snaps.select(slice(k, k + 1)), contacts=None)
 
 
 def _bitwise_equal(a, b) -> bool:
@@ -107,8 +98,6 @@ def same_model(a: Path, b: Path) -> bool:
 
 def fold_frames(model_dir: Path, run_dir: Path, fold: int, args, log) -> list[dict]:
     """Records of every scored frame of fold ``fold``'s held-out trajectories."""
-    import dataclasses
-
     import rheograph
     from rheograph.errors import InputError
     from rheograph.io.configurations import noisy_positions

@@ -57,19 +57,8 @@ def predict(model, snaps, keep, estimate: bool = False) -> tuple[np.ndarray, np.
     """(predictions (S, 3), the simulator's values (S, 3), share in domain) at the kept snapshots;
     ``estimate``: each snapshot's radii estimated from its configuration first."""
     if estimate:
-        import dataclasses
-
-        kept = np.flatnonzero(keep)
-        snaps = dataclasses.replace(
-            snaps,
-            positions=snaps.positions[kept],
-            le_offset=snaps.le_offset[kept],
-            strain=snaps.strain[kept],
-            targets=snaps.targets[kept],
-            jammed=snaps.jammed[kept],
-        )
-        keep = np.ones(kept.size, dtype=bool)
-        table = model.predict_with_estimated_radii(snaps)
+        table = model.predict_with_estimated_radii(snaps.select(keep))
+        keep = np.ones(int(np.sum(keep)), dtype=bool)
     else:
         table = model.predict_snapshots(snaps)
     pred = np.stack([table[f"{t}_pred"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]

@@ -168,16 +168,7 @@ def few_snapshots(count: int):
     snaps = read_snapshots(
         str(ROOT / "data/paper/multirun/N400_phi0.76_s10_seed1_d0.002_implicit/trajectory.h5")
     )
-    keep = slice(len(snaps) - count, len(snaps))
-    return dataclasses.replace(
-        snaps,
-        positions=snaps.positions[keep],
-        le_offset=snaps.le_offset[keep],
-        strain=snaps.strain[keep],
-        targets=snaps.targets[keep],
-        jammed=snaps.jammed[keep],
-        contacts=None,
-    )
+    return dataclasses.replace(snaps.select(slice(len(snaps) - count, len(snaps))), contacts=None)
 
 
 def test_batched_prediction_equals_the_per_snapshot_path():

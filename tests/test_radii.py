@@ -89,16 +89,7 @@ def polydisperse_with_nominal_radii(spread: float, count: int = 3):
     species' nominal radius instead of its own (what a microscope gives), and the true radii."""
     path = POLYDISPERSE / f"N400_phi0.76_s20_poly{spread:g}_seed1_d0.002_implicit" / "trajectory.h5"
     snaps = read_snapshots(path)
-    last = slice(len(snaps) - count, len(snaps))
-    snaps = dataclasses.replace(
-        snaps,
-        positions=snaps.positions[last],
-        le_offset=snaps.le_offset[last],
-        strain=snaps.strain[last],
-        targets=snaps.targets[last],
-        jammed=snaps.jammed[last],
-        contacts=None,
-    )
+    snaps = snaps.select(slice(len(snaps) - count, len(snaps)))
     return dataclasses.replace(snaps, radii=nominal_of(path, snaps)), snaps.radii
 
 

@@ -104,21 +104,6 @@ def snapshots_with_estimated_radii(snaps: Snapshots, mean: bool = False) -> list
     if mean:
         return [dataclasses.replace(snaps, radii=np.mean(estimates, axis=0), contacts=None)]
 
-    def one(value, k):  # a stated precision: one for all snapshots, or one each (noisy copies)
-        return value[k : k + 1] if np.ndim(value) == 1 else value
-
     return [
-        dataclasses.replace(
-            snaps,
-            position_noise=one(snaps.position_noise, k),
-            axial_noise=one(snaps.axial_noise, k),
-            positions=snaps.positions[k : k + 1],
-            le_offset=snaps.le_offset[k : k + 1],
-            strain=snaps.strain[k : k + 1],
-            targets=snaps.targets[k : k + 1],
-            jammed=snaps.jammed[k : k + 1],
-            radii=radii,
-            contacts=None,
-        )
-        for k, radii in enumerate(estimates)
+        dataclasses.replace(snaps.select(slice(k, k + 1)), radii=radii) for k, radii in enumerate(estimates)
     ]

@@ -7,6 +7,7 @@ trajectories) and ``rheograph.io.lfdem`` (LF_DEM runs).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zipfile
 import zlib
@@ -90,6 +91,26 @@ class Snapshots:
         """The parameter mapping graph features and the one-solve read: physical parameters, the state
         point and N (``rheograph.graphs.features``)."""
         return {**self.params, "stress": self.stress, "phi": self.phi, "n_particles": self.n_particles}
+
+    def select(self, index) -> Snapshots:
+        """The snapshots at ``index`` (a slice, indices or a boolean mask over the S snapshots), with their
+        per-snapshot values (strain, targets, arrest, recorded contacts, stated precisions) alike."""
+        keep = np.arange(len(self))[index]
+
+        def per_snapshot(value):  # a stated precision: one for all snapshots, or one each
+            return value[keep] if np.ndim(value) == 1 else value
+
+        return dataclasses.replace(
+            self,
+            positions=self.positions[keep],
+            le_offset=self.le_offset[keep],
+            strain=self.strain[keep],
+            targets=self.targets[keep],
+            jammed=self.jammed[keep],
+            contacts=None if self.contacts is None else [self.contacts[k] for k in keep],
+            position_noise=per_snapshot(self.position_noise),
+            axial_noise=per_snapshot(self.axial_noise),
+        )
 
     def missing_params(self, names=PHYSICAL_PARAMS) -> list[str]:
         return [name for name in names if name not in self.params]
