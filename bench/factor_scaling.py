@@ -31,13 +31,24 @@ from bench.publishing import command_line, publish, table
 from rheograph.sim import SimParams, Simulation  # noqa: E402
 from rheograph.sim.params import scheme_settings  # noqa: E402
 
+# the flowing state point whose matrix is factorised: dense and frictional, per dimension
+STATE = {2: dict(phi=0.76, stress=200.0), 3: dict(phi=0.56, stress=200.0)}
 
-def measure(n: int, warmup: int, repeats: int, windows: int, orderings) -> list[dict]:
-    """One row per fill-reducing ordering, all on the same matrix."""
+
+def measure(n: int, warmup: int, repeats: int, windows: int, orderings, dim: int = 2) -> list[dict]:
+    """One row per fill-reducing ordering, all on the same matrix (2D discs, or 3D spheres: 6 degrees
+    of freedom a particle instead of 3)."""
     from sksparse import cholmod
 
-    params = SimParams(n_particles=n, phi=0.76, stress=200.0, disp_max=2e-3, **scheme_settings("implicit"))
-    sim = Simulation(params, solver="cholmod")
+    if dim == 3:
+        from rheograph.sim.integrator3d import Simulation3D
+        from rheograph.sim.params3d import SimParams3D
+
+        params = SimParams3D(n_particles=n, **STATE[3], disp_max=2e-3, **scheme_settings("implicit"))
+        sim = Simulation3D(params, solver="cholmod")
+    else:
+        params = SimParams(n_particles=n, **STATE[2], disp_max=2e-3, **scheme_settings("implicit"))
+        sim = Simulation(params, solver="cholmod")
     for _ in range(warmup):
         sim.step()
     lower = sim.solver._lower.copy()  # the lower triangle CHOLMOD factorises, this step's values
@@ -73,6 +84,7 @@ def measure(n: int, warmup: int, repeats: int, windows: int, orderings) -> list[
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[400, 2000, 8000, 20000])
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="discs (2) or spheres (3)")
     ap.add_argument("--warmup", type=int, default=40, help="steps before the matrix is taken")
     ap.add_argument("--windows", type=int, default=5)
     ap.add_argument(
@@ -100,14 +112,17 @@ def main(argv=None) -> None:
     rows = []
     for n in args.n:
         repeats = max(3, int(args.particle_factorisations / n))
-        rows += measure(n, args.warmup, repeats, args.windows, args.orderings)
+        rows += measure(n, args.warmup, repeats, args.windows, args.orderings, args.dim)
         print(rows[-len(args.orderings) :], flush=True)
     first = {r["ordering"]: r for r in reversed(rows)}  # each ordering's smallest-N row
+    state = STATE[args.dim]
+    shape = " of spheres (3D, 6 degrees of freedom each)" if args.dim == 3 else ""
     lines = [
         f"One numeric factorisation of the resistance matrix (CHOLMOD, nested dissection, supernodal) of a "
-        f"flowing φ = 0.76, σ/σ0 = 200 configuration (implicit, disp_max 2e-3, {args.warmup} steps past "
-        f"the start), CPU time per particle (median of {args.windows} windows); work = Σ_j c_j² over the "
-        f"columns of L.  Ratios to N = {min(args.n)} with the same ordering.\n",
+        f"flowing φ = {state['phi']:g}, σ/σ0 = {state['stress']:g} configuration{shape} (implicit, disp_max "
+        f"2e-3, {args.warmup} steps past the start), CPU time per particle (median of {args.windows} "
+        f"windows); work = Σ_j c_j² over the columns of L.  Ratios to N = {min(args.n)} with the same "
+        "ordering.\n",
     ]
     header = ["N", "ordering", "nnz(L) per particle", "work per particle (flop)", "ratio", "µs per particle"]
     header += ["ratio", "GFlop/s", "analysis ms"]
