@@ -1,5 +1,5 @@
 """What a clone carries: the tracked files stay within the size a researcher downloads without thinking
-twice, the shipped models stay small, and run directories under docs/results keep reports, metrics and
+twice (the 3D flow-curve set, still growing, within a budget of its own), the shipped models stay small, and run directories under docs/results keep reports, metrics and
 predictions, never weights, event files or databases (the published numbers are re-read from those)."""
 
 import subprocess
@@ -8,7 +8,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-CHECKOUT_LIMIT_BYTES = 320_000_000  # the training data included
+CHECKOUT_LIMIT_BYTES = 320_000_000  # the 2D training data included
+# the 3D flow-curve set grows run by run towards its own budget (seven volume fractions, eight stresses,
+# two to three seeds, snapshots every 0.1 strain): counted apart
+SET_3D = "data/flow_curves_3d"
+SET_3D_LIMIT_BYTES = 60_000_000
 SHIPPED_MODELS_LIMIT_BYTES = 15_000_000
 NOT_IN_RESULTS = (".pt", ".ckpt", ".db", ".sqlite", ".pkl", ".pickle")
 
@@ -24,9 +28,12 @@ def tracked_files() -> list[Path]:
 
 
 def test_the_checkout_stays_within_its_size():
-    files = tracked_files()
-    total = sum(f.stat().st_size for f in files if f.is_file())
-    assert total <= CHECKOUT_LIMIT_BYTES, f"tracked files {total / 1e6:.1f} MB"
+    set_3d = ROOT / SET_3D
+    sizes = {f: f.stat().st_size for f in tracked_files() if f.is_file()}
+    in_set_3d = sum(size for f, size in sizes.items() if set_3d in f.parents)
+    rest = sum(sizes.values()) - in_set_3d
+    assert rest <= CHECKOUT_LIMIT_BYTES, f"tracked files outside {SET_3D}: {rest / 1e6:.1f} MB"
+    assert in_set_3d <= SET_3D_LIMIT_BYTES, f"{SET_3D}: {in_set_3d / 1e6:.1f} MB"
 
 
 def test_the_shipped_models_stay_small():
