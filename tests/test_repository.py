@@ -1,6 +1,7 @@
 """What a clone carries: the tracked files stay within the size a researcher downloads without thinking
-twice (the 3D flow-curve set, still growing, within a budget of its own), the shipped models stay small, and run directories under docs/results keep reports, metrics and
-predictions, never weights, event files or databases (the published numbers are re-read from those)."""
+twice (the 3D flow-curve set, still growing, within a budget of its own), the shipped models stay
+small, and run directories under docs/results keep reports, metrics and predictions, never weights,
+event files or databases (the published numbers are re-read from those)."""
 
 import subprocess
 from pathlib import Path
