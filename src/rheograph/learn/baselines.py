@@ -22,8 +22,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from rheograph.graphs.features import COMPUTED_GRAPH_INPUTS
-from rheograph.learn.module import physical_targets
+from rheograph.graphs.dataset import SnapshotGraphDataset
+from rheograph.graphs.features import COMPUTED_GRAPH_INPUTS, inverse_transform
+from rheograph.learn.bundle import bundle_graph_settings, read_bundle
+from rheograph.learn.datamodule import split_files
+from rheograph.learn.module import fold_metrics, physical_targets
 from rheograph.naming import state_point_key
 
 
@@ -101,8 +104,6 @@ def baseline_predictions(train: dict, test: dict, targets) -> dict:
 def physics_rows(train: dict, test: dict, viscosity_scale: float) -> dict:
     """Physical predictions (G_test, 3) of the physics-only rows (module docstring) from ``physics``
     (G, 3): one-solve η_r, contact-spring Π [σ0], counted Z_μ."""
-    from rheograph.graphs.features import inverse_transform
-
     solve = test["physics"].copy()
     eta_true = inverse_transform(train["y"][:, 0], viscosity_scale)
     ok = (eta_true > 0) & (train["physics"][:, 0] > 0)
@@ -142,12 +143,6 @@ def physics_fold_metrics(run_dir, k: int, cache_dir) -> dict:
     same order as in training); for runs made before the rows were part of every report."""
     import json
     from pathlib import Path
-
-    from rheograph.graphs.dataset import SnapshotGraphDataset
-    from rheograph.learn.bundle import bundle_graph_settings, read_bundle
-    from rheograph.learn.datamodule import split_files
-    from rheograph.learn.module import fold_metrics
-    from rheograph.naming import state_point_key
 
     run_dir = Path(run_dir)
     split = json.loads((run_dir / f"fold{k}_split.json").read_text())

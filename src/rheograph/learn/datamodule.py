@@ -30,10 +30,14 @@ from torch_geometric.loader import DataLoader
 
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, NoisyGraphs, SnapshotGraphDataset
-from rheograph.io.snapshots import read_snapshots
+from rheograph.io.configurations import PHYSICAL_PARAMS
+from rheograph.io.hdf5 import read_params
+from rheograph.io.index import index_files
+from rheograph.io.snapshots import read_snapshots, source_kind
 from rheograph.learn.device_batch import DeviceGraphSet, device_loader
 from rheograph.learn.jamming import fit_jam_map
 from rheograph.naming import state_point_key
+from rheograph.sim.params import SimParams
 
 log = logging.getLogger("rheograph")
 
@@ -339,10 +343,6 @@ def source_summary(path: str, lfdem_params=None) -> dict:
     """State point, N, physical parameters and simulation step of a snapshot source: ``phi``,
     ``stress``, ``n_particles``, ``params`` (physical), ``numerics`` (rheograph.io.snapshots) and the
     space dimension ``dim`` (2 or 3)."""
-    from rheograph.io.configurations import PHYSICAL_PARAMS
-    from rheograph.io.hdf5 import read_params
-    from rheograph.io.snapshots import read_snapshots, source_kind
-
     if source_kind(path) == "rheograph":
         try:
             stored = read_params(path)  # the parameters only: no snapshot is read
@@ -382,9 +382,6 @@ def suspension_record(files, lfdem_params=None) -> dict:
     refused, a model has no input for them) and ``solve_numerics``, per area fraction and N the step
     (``disp_max``, ``dt_max``, ``lagged_step_control``) the one-solve input of its graphs used, and the
     space dimension ``dim`` of its snapshots (2 or 3; 2D and 3D files are refused together)."""
-    from rheograph.io.configurations import PHYSICAL_PARAMS
-    from rheograph.sim.params import SimParams
-
     physical, numerics, dims = {}, {}, set()
     defaults = SimParams.defaults()
     for path in files:
@@ -435,8 +432,6 @@ def split_files(split: dict, root: str | Path = ".") -> list[str]:
 def expand_files(files) -> list[str]:
     """Expand glob patterns and sweep indexes (``*.json`` from ``rheograph.runs.sweep_index``) into a
     sorted list."""
-    from rheograph.io.index import index_files
-
     patterns = [files] if isinstance(files, str) else list(files)
     out = set()
     for pattern in patterns:

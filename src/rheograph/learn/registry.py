@@ -20,7 +20,7 @@ import math
 import shutil
 from pathlib import Path
 
-from rheograph.errors import InputError
+from rheograph.errors import InputError, one_line_errors
 from rheograph.graphs.targets import spec_of_record
 from rheograph.io.json_files import read_json
 from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle
@@ -385,7 +385,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    from rheograph.errors import one_line_errors
-
     with one_line_errors("rheograph.learn.registry"):
         main()

@@ -19,6 +19,7 @@ from rheograph.errors import InputError, OtherRunError
 from rheograph.graphs.dataset import GraphSettings
 from rheograph.graphs.features import NODE_FEATURES
 from rheograph.graphs.targets import TargetSpec
+from rheograph.io.hdf5 import read_run_info
 from rheograph.io.snapshots import data_fingerprint
 from rheograph.learn.baselines import baseline_predictions, dataset_arrays
 from rheograph.learn.bundle import predict_dataset, save_bundle
@@ -33,7 +34,8 @@ from rheograph.learn.module import (
     check_training_factories,
     fold_metrics,
 )
-from rheograph.naming import state_point_key
+from rheograph.naming import run_name, state_point_key
+from rheograph.sim.params import SimParams
 
 log = logging.getLogger("rheograph.train")
 
@@ -45,9 +47,7 @@ def ensure_dataset(cfg: DictConfig) -> None:
         return
     from hydra import compose
 
-    from rheograph.naming import run_name
     from rheograph.runs.runner import run_state_point
-    from rheograph.sim.params import SimParams
 
     directory = Path(spec.directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -65,8 +65,6 @@ def ensure_dataset(cfg: DictConfig) -> None:
                 params = SimParams.from_mapping(values)
                 path = directory / (run_name(params) + ".h5")
                 if path.exists():
-                    from rheograph.io.hdf5 import read_run_info
-
                     if read_run_info(path)["status"] in ("completed", "jammed"):
                         continue
                 log.info("simulating missing state point %s", path.name)

@@ -27,8 +27,8 @@ from hydra import compose
 from lightning.pytorch.callbacks import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from rheograph.errors import InputError
-from rheograph.learn.train import train_folds
+from rheograph.errors import InputError, hydra_error_line
+from rheograph.learn.train import check_run_settings, ensure_dataset, graph_settings, setup_fold, train_folds
 
 log = logging.getLogger("rheograph.tune")
 
@@ -133,9 +133,6 @@ def check_base_config(cfg: DictConfig) -> None:
     or trainer option) would fail every trial; it ends the study before the first one instead, as one
     line (InputError)."""
     from hydra.errors import HydraException
-
-    from rheograph.errors import hydra_error_line
-    from rheograph.learn.train import check_run_settings, ensure_dataset, graph_settings, setup_fold
 
     try:
         train_cfg = compose(config_name="train", overrides=fixed_overrides(cfg))
