@@ -17,14 +17,13 @@ A subclass is registered in one of three ways:
 from __future__ import annotations
 
 from rheograph.errors import InputError
+from rheograph.learn.module import SurrogateModule
 from rheograph.learn.nets import ENTRY_POINT_GROUP, class_name, entry_point_class
 
 _registered: dict[str, type] = {}
 
 
 def _check_network(cls, where: str) -> type:
-    from rheograph.learn.module import SurrogateModule
-
     if not (isinstance(cls, type) and issubclass(cls, SurrogateModule)):
         raise InputError(f"{where}: {cls!r} is not a subclass of rheograph.learn.module.SurrogateModule")
     return cls
@@ -45,8 +44,6 @@ def _from_entry_points(name: str) -> type | None:
 def registered_network(name, where, network_class: type | None = None) -> type:
     """The registered class a bundle at ``where`` names (``None``: ``SurrogateModule``); ``network_class``
     is registered for this call only.  A name no registered class has is refused in one line."""
-    from rheograph.learn.module import SurrogateModule
-
     if name is None:
         return SurrogateModule
     if not isinstance(name, str):

@@ -20,9 +20,12 @@ import math
 import shutil
 from pathlib import Path
 
+import numpy as np
+
 from rheograph.errors import InputError, one_line_errors
 from rheograph.graphs.targets import spec_of_record
 from rheograph.io.json_files import read_json
+from rheograph.learn.baselines import physics_fold_metrics
 from rheograph.learn.bundle import complete_bundle, read_bundle, write_bundle
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
@@ -131,10 +134,6 @@ def _relative(path: Path) -> str:
 def _with_physics_rows(run_dir: Path, metrics: dict, cache_dir) -> dict:
     """``metrics`` with the physics-only rows' fold means, computed on the run's test folds where a run
     of an older version lacks them."""
-    import numpy as np
-
-    from rheograph.learn.baselines import physics_fold_metrics
-
     if any(key.startswith("baseline/physics_") for key in metrics["mean"]):
         return metrics
     per_fold = [physics_fold_metrics(run_dir, f["fold"], cache_dir) for f in metrics["folds"]]
