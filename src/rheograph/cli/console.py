@@ -16,6 +16,8 @@ from __future__ import annotations
 import os
 import sys
 
+from rheograph.errors import one_line_errors, run_hydra_app
+
 HYDRA_APPS = {"simulate": "simulate", "train": "train", "tune": "tune"}
 TOOLS = {
     "predict": "rheograph.learn.predict",
@@ -32,7 +34,6 @@ def _hydra_app(name: str):
     from omegaconf import DictConfig
 
     from rheograph.cli import hydra_apps
-    from rheograph.errors import one_line_errors
 
     hydra_apps.register_resolvers()
     run = {
@@ -65,13 +66,9 @@ def main(argv=None) -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     sys.argv = [f"rheograph {command}", *rest]
     if command in HYDRA_APPS:
-        from rheograph.errors import run_hydra_app
-
         run_hydra_app(_hydra_app(command), f"rheograph {command}")
         return
     import importlib
-
-    from rheograph.errors import one_line_errors
 
     with one_line_errors(f"rheograph {command}"):
         importlib.import_module(TOOLS[command]).main(rest)

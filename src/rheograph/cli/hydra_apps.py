@@ -13,6 +13,7 @@ from pathlib import Path
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
+from rheograph.errors import InputError, RefusedBeforeRun, StatePointError
 from rheograph.naming import run_name, sim_id
 
 log = logging.getLogger("rheograph")
@@ -93,8 +94,6 @@ class CheckBeforeRunDirectory(Callback):
         self.entry_point = entry_point
 
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
-        from rheograph.errors import InputError, RefusedBeforeRun
-
         try:
             _settings_check(self.entry_point)(config)
         except InputError as exc:
@@ -125,7 +124,6 @@ def simulate_main(cfg: DictConfig) -> dict:
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
-    from rheograph.errors import InputError, StatePointError
     from rheograph.runs.runner import run_state_point
 
     try:
