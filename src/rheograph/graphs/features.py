@@ -271,14 +271,20 @@ NODE_FEATURES = 2  # columns of node_features: the one-hot radius
 SPECIES_BAND = 0.3
 
 
+def species_size(radii, size_ratio: float) -> np.ndarray:
+    """The size (N,) [a] of each particle's species, 1 or ``size_ratio``: the one nearer its radius on a
+    log scale (the species the one-hot input gives it)."""
+    return np.where(np.asarray(radii, dtype=np.float64) > np.sqrt(size_ratio), size_ratio, 1.0)
+
+
 def node_features(radii, size_ratio):
     """One-hot species (N, 2): column 0 small (a = 1), column 1 large (a = size_ratio), each radius
     assigned to the species nearer on a log scale (radii spread about their species' size, such as a
     polydisperse sample's or estimated ones, keep their species; the edges and physics inputs read the
     radii themselves).  A radius farther than SPECIES_BAND from both sizes is refused."""
     radii = np.asarray(radii, dtype=np.float64)
-    large = radii > np.sqrt(size_ratio)
-    nearest = np.where(large, size_ratio, 1.0)
+    nearest = species_size(radii, size_ratio)
+    large = nearest == size_ratio
     outside = np.abs(radii / nearest - 1.0) > SPECIES_BAND
     if np.any(outside):
         raise InputError(

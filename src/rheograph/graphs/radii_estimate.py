@@ -24,6 +24,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spl
 
 from rheograph.errors import InputError
+from rheograph.graphs.features import species_size
 from rheograph.io.configurations import Snapshots
 from rheograph.sim import geometry, geometry3d
 
@@ -80,8 +81,7 @@ def species_spread(radii, size_ratio: float) -> float:
     """RMS relative deviation of ``radii`` (N,) [a] from their species' sizes, 1 and ``size_ratio`` (each
     radius taken as of the species nearer on a log scale, as the one-hot species input takes it)."""
     radii = np.asarray(radii, dtype=np.float64)
-    nearest = np.where(radii > np.sqrt(size_ratio), size_ratio, 1.0)
-    return float(np.sqrt(np.mean((radii / nearest - 1.0) ** 2)))
+    return float(np.sqrt(np.mean((radii / species_size(radii, size_ratio) - 1.0) ** 2)))
 
 
 def snapshots_with_estimated_radii(snaps: Snapshots, mean: bool = False) -> list[Snapshots]:
