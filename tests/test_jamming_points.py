@@ -20,6 +20,7 @@ from rheograph.analysis.jamming_points import (
     near,
     plateau_branch,
     read_runs,
+    section_blocks,
 )
 from rheograph.errors import InputError
 
@@ -215,3 +216,22 @@ def test_committed_n400_set_the_two_fit_methods_agree_once_branches_keep_their_a
         assert branch_amplitudes[key] == pytest.approx(divergence[key], abs=0.005), key
     assert branch_amplitudes["rms_log"] < 0.8 * shared["rms_log"]
     assert shared["phi_j0"] > divergence["phi_j0"] + 0.01
+
+
+def test_discs_and_spheres_of_one_n_are_fitted_apart_and_the_spheres_are_labelled():
+    """A 2D and a 3D set with the same N: each plateau divergence gives back its own phi_J (0.80 for
+    the discs, 0.60 for the spheres), the rows carry their dimension and the table marks the 3D one."""
+    runs = []
+    for dim, phi_j, phis in ((2, 0.80, (0.74, 0.76, 0.78)), (3, 0.60, (0.54, 0.56, 0.58))):
+        for phi in phis:
+            run = _run(500, phi, 200.0, 1, (phi_j - phi) ** -2.0, z_mu=2.0, z=4.0)
+            run["dim"] = dim
+            runs.append(run)
+    rows = [r for r in jamming_table(runs, n_boot=20) if r["method"] == "divergence, beta = 2"]
+    fitted = {(r["dim"], r["quantity"]): r["phi_j"] for r in rows}
+    assert fitted == {
+        (2, "phi_J^mu"): pytest.approx(0.80, abs=1e-6),
+        (3, "phi_J^mu"): pytest.approx(0.60, abs=1e-6),
+    }
+    cells = [block for block in section_blocks(rows, "cmd") if "table" in block][0]["table"]["rows"]
+    assert sorted(row[0] for row in cells) == ["500", "500 (3D)"]

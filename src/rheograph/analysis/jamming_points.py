@@ -39,8 +39,8 @@ MAX_ARREST_RATE = 1e4
 
 def read_runs(index_paths) -> list[dict]:
     """One record per trajectory of the indexes: N, phi, sigma/sigma0, seed, mu, status, the strain it
-    reached (where it arrested, for a jammed run), steady eta_r, Z_mu, Z (NaN where the run did not
-    flow)."""
+    reached (where it arrested, for a jammed run), steady eta_r, Z_mu, Z and Pi/sigma0 (NaN where the
+    run did not flow), and the dimension (2 for the monolayer, whose files carry no ``dim``; 3)."""
     runs = []
     for path in index_paths:
         try:
@@ -63,6 +63,8 @@ def read_runs(index_paths) -> list[dict]:
                     "eta": float(s.get("viscosity") or np.nan),
                     "z_mu": float(s.get("z_mu") if s.get("z_mu") is not None else np.nan),
                     "z": float(s.get("z") if s.get("z") is not None else np.nan),
+                    "pressure": float(s.get("pressure") if s.get("pressure") is not None else np.nan),
+                    "dim": int(p.get("dim", 2)),
                 }
             )
     return runs
@@ -251,24 +253,40 @@ def near(branch: list[dict], window: float) -> list[dict]:
     return [r for r in branch if r["phi"] >= top - window - 1e-9]
 
 
-def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list[dict]:
-    """Fit rows per N (method, branch, phi_J with its 68 % bootstrap interval, beta, rms); the
-    divergence fits use the area fractions within ``window`` of the branch's highest (``near``)."""
+def systems(runs: list[dict]):
+    """(dim, N, the runs of that dimension and size) for each system of the runs, 2D first: a 2D and a
+    3D set are fitted apart even where their N coincide (the jamming point is a packing fraction of
+    discs in one, of spheres in the other)."""
+    for dim, n in sorted({(r.get("dim", 2), r["n"]) for r in runs}):
+        yield dim, n, [r for r in runs if r.get("dim", 2) == dim and r["n"] == n]
+
+
+def size_label(n: int, dim: int) -> str:
+    """How a system is named in tables and titles: its N, marked (3D) for spheres."""
+    return f"{n}" if dim == 2 else f"{n} (3D)"
+
+
+def jamming_table(
+    runs: list[dict], seed: int = 0, window: float = 0.05, n_boot: int = BOOTSTRAP
+) -> list[dict]:
+    """Fit rows per system (dimension and N; method, branch, phi_J with its 68 % interval over
+    ``n_boot`` bootstrap samples, beta, rms); the divergence fits use the packing fractions within
+    ``window`` of the branch's highest (``near``)."""
     rng = np.random.default_rng(seed)
     rows = []
-    for n in sorted({r["n"] for r in runs}):
+    for dim, n, system in systems(runs):
         branches = [
             (
                 "phi_J^0",
                 "frictionless (mu = 0; sigma/sigma0 <= 0.5 with Z_mu < 0.02)",
-                frictionless_branch(runs, n),
+                frictionless_branch(system, n),
             )
         ]
-        plateau, top = plateau_branch(runs, n)
+        plateau, top = plateau_branch(system, n)
         branches.append(("phi_J^mu", f"high-stress plateau (sigma/sigma0 = {top:g})", plateau))
         for name, everyone in (
-            ("phi_J^0", frictionless_branch(runs, n, flowing_only=False)),
-            ("phi_J^mu", plateau_branch(runs, n, flowing_only=False)[0]),
+            ("phi_J^0", frictionless_branch(system, n, flowing_only=False)),
+            ("phi_J^mu", plateau_branch(system, n, flowing_only=False)[0]),
         ):
             bracket = arrest_bracket(everyone)
             if bracket:
@@ -276,6 +294,7 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                 rows.append(
                     {
                         "n": n,
+                        "dim": dim,
                         "quantity": name,
                         "method": "arrest bracket: every run flows / every run arrests",
                         "data": next(label for q, label, _ in branches if q == name),
@@ -293,6 +312,7 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                 rows.append(
                     {
                         "n": n,
+                        "dim": dim,
                         "quantity": name,
                         "method": f"arrest probability 1/2 within {crossing['window']:.3g} strain "
                         f"({crossing['arrested']} of {crossing['runs']} arrest; logistic, profile)",
@@ -319,10 +339,12 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                     lambda s, b=beta: fit_divergence([r["phi"] for r in s], [r["eta"] for r in s], b),
                     ["phi_j", "beta"],
                     rng,
+                    n_boot,
                 )
                 rows.append(
                     {
                         "n": n,
+                        "dim": dim,
                         "quantity": name,
                         "method": "divergence, beta = 2" if beta else "divergence, beta fitted",
                         "data": label,
@@ -335,7 +357,7 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                         "rms_log": fit["rms_log"],
                     }
                 )
-        everything = [r for r in runs if r["n"] == n and flowing(r) and np.isfinite(r["z_mu"]) and r["z"] > 0]
+        everything = [r for r in system if flowing(r) and np.isfinite(r["z_mu"]) and r["z"] > 0]
         if len({r["phi"] for r in everything}) >= 3 and any(r["z_mu"] > 0 for r in everything):
             for beta, per_branch in ((2.0, False), (None, False), (None, True)):
 
@@ -349,11 +371,12 @@ def jamming_table(runs: list[dict], seed: int = 0, window: float = 0.05) -> list
                     )
 
                 fit = wc(everything)
-                spread = bootstrap(everything, wc, ["phi_j0", "phi_jmu", "beta"], rng)
+                spread = bootstrap(everything, wc, ["phi_j0", "phi_jmu", "beta"], rng, n_boot)
                 for name, key in (("phi_J^0", "phi_j0"), ("phi_J^mu", "phi_jmu")):
                     rows.append(
                         {
                             "n": n,
+                            "dim": dim,
                             "quantity": name,
                             "method": "Wyart–Cates, f = Z_mu / Z, "
                             + ("log A linear in f, " if per_branch else "")
@@ -399,7 +422,7 @@ def section_blocks(rows: list[dict], command: str) -> list[dict]:
         )
         rms = "—" if not np.isfinite(r["rms_log"]) else f"{r['rms_log']:.3f}"
         body.append(
-            [f"{r['n']}", r["quantity"], r["method"], r["data"], f"{r['trajectories']}"]
+            [size_label(r["n"], r["dim"]), r["quantity"], r["method"], r["data"], f"{r['trajectories']}"]
             + [f"{r['phi_range'][0]:g}–{r['phi_range'][1]:g}", f"{r['phi_j']:.4f} ({low:.4f}–{high:.4f})"]
             + [beta, rms]
         )
@@ -425,13 +448,14 @@ def phase_diagram_data(runs: list[dict], rows: list[dict]) -> dict:
     such a fit); per branch (``phi_J^0``, ``phi_J^mu``) the divergence's φ_J (β fitted) and the 68 %
     interval of arrest probability 1/2 (null where not fitted)."""
     sizes = []
-    for n in sorted({r["n"] for r in runs}):
-        frictional = [r for r in runs if r["n"] == n and r["mu"] > 0]
+    for dim, n, system in systems(runs):
+        rows_here = [r for r in rows if r["dim"] == dim]
+        frictional = [r for r in system if r["mu"] > 0]
         states = {
             status: [[r["phi"], r["stress"]] for r in frictional if r["status"] == status]
             for status in ("completed", "jammed")
         }
-        candidates = [r for r in rows if r["n"] == n and "wyart_cates" in r and r["beta_ci"]]
+        candidates = [r for r in rows_here if r["n"] == n and "wyart_cates" in r and r["beta_ci"]]
         best = min(candidates, key=lambda r: r["rms_log"]) if candidates else None
         line = None
         if best and best["wyart_cates"]:
@@ -448,21 +472,22 @@ def phase_diagram_data(runs: list[dict], rows: list[dict]) -> dict:
             }
         divergence, arrest = {}, {}
         for quantity in BRANCHES:
-            mine = [r for r in rows if r["n"] == n and r["quantity"] == quantity]
+            mine = [r for r in rows_here if r["n"] == n and r["quantity"] == quantity]
             row = next((r for r in mine if r["method"] == "divergence, beta fitted"), None)
             divergence[quantity] = row["phi_j"] if row else None
             crossing = next((r for r in mine if r["method"].startswith("arrest probability")), None)
             arrest[quantity] = list(crossing["phi_j_ci"]) if crossing else None
-        sizes.append(
-            {
-                "n": n,
-                "flows": states["completed"],
-                "jammed": states["jammed"],
-                "wyart_cates": line,
-                "divergence": divergence,
-                "arrest": arrest,
-            }
-        )
+        size = {
+            "n": n,
+            "flows": states["completed"],
+            "jammed": states["jammed"],
+            "wyart_cates": line,
+            "divergence": divergence,
+            "arrest": arrest,
+        }
+        if dim != 2:  # the 2D records predate the key: a system without it is a monolayer
+            size["dim"] = dim
+        sizes.append(size)
     return {"sizes": sizes}
 
 
@@ -509,7 +534,7 @@ def draw_phase_diagram(data: dict):
         ax.set_xscale("linear")
         ax.set_yscale("log")
         ax.set_xlabel(r"$\phi$")
-        ax.set_title(f"N = {size['n']}")
+        ax.set_title(f"N = {size_label(size['n'], size.get('dim', 2))}")
     axes[0][0].set_ylabel(r"$\sigma/\sigma_0$")
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
@@ -520,8 +545,11 @@ def draw_phase_diagram(data: dict):
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("indexes", nargs="+", help="run indexes (python -m rheograph.runs.sweep_index)")
+    ap.add_argument("--out", help="markdown file whose <!-- SECTION:start/end --> section gets the table")
     ap.add_argument(
-        "--out", help="markdown file whose <!-- jamming_fits:start/end --> section gets the table"
+        "--section",
+        default="jamming_fits",
+        help="name of the marked section (default jamming_fits; the 3D set's is jamming_fits_3d)",
     )
     ap.add_argument(
         "--record",
@@ -549,11 +577,11 @@ def main(argv=None) -> None:
     text = render_blocks(blocks)
     print(text)
     if args.out:
-        replace_section(Path(args.out), "jamming_fits", text)
+        replace_section(Path(args.out), args.section, text)
     figure = phase_diagram_data(runs, rows)
     if args.record:
         record = {
-            "section": "jamming_fits",
+            "section": args.section,
             "page": docs_page(args.out),
             "command": command,
             "blocks": blocks,
