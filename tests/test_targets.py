@@ -246,9 +246,10 @@ def test_a_bundle_round_trip_keeps_the_specification(tmp_path):
 
 
 def test_every_shipped_model_reads_as_the_specification_its_records_state():
-    """The shipped bundles (an earlier format) and their cards give the specification their booleans and
-    columns said: each reference of the booleans, at the column the module was built with."""
-    from rheograph.learn.bundle import load_bundle
+    """The shipped bundles and their cards give one specification; those of an earlier format give the
+    one their booleans and columns said: each reference of the booleans, at the column the module was
+    built with."""
+    from rheograph.learn.bundle import BUNDLE_FORMAT, load_bundle
     from rheograph.learn.module import SurrogateModule
     from rheograph.learn.registry import MODELS_DIR, list_models
 
@@ -265,9 +266,12 @@ def test_every_shipped_model_reads_as_the_specification_its_records_state():
             == spec
             == spec_of_record(json.loads((path.parent / "card.json").read_text())["graph"])
         )
+        lightning = SurrogateModule.load_from_checkpoint(path, map_location="cpu", weights_only=True)
+        assert lightning.targets == spec and lightning.reference_columns == module.reference_columns, name
+        if raw["format"] == BUNDLE_FORMAT:  # written in the current form: the specification as it is
+            assert graph["targets"] == spec.to_config(), name
+            continue
         assert spec.legacy_options() == {k: graph.get(k, False) for k in LEGACY_GRAPH_KEYS}, name
         old = [(0, hparams.get("viscosity_input", -1)), (1, hparams.get("pressure_input", -1)),
                (2, hparams.get("z_mu_input", -1))]  # fmt: skip
         assert module.reference_columns == [(k, c) for k, c in old if c >= 0], name
-        lightning = SurrogateModule.load_from_checkpoint(path, map_location="cpu", weights_only=True)
-        assert lightning.targets == spec and lightning.reference_columns == module.reference_columns, name

@@ -153,7 +153,9 @@ def write_card(directory: Path, name: str, run_dir: Path, bundle: dict, cache_di
         "split": metrics.get("split"),
         "folds": len(metrics["folds"]),
         "graph": graph,
-        "domain": {k: domain[k] for k in ("phi", "stress", "n_particles", "size_ratio")},
+        "domain": {
+            k: domain[k] for k in ("phi", "stress", "n_particles", "size_ratio", "dim") if k in domain
+        },
         "physical_params": domain["physical_params"],
         "solve_numerics": domain["solve_numerics"],
         "position_noise": domain.get("position_noise", 0.0),
@@ -196,6 +198,8 @@ def card_markdown(card: dict) -> str:
         f"(split: {card['split']}; held-out scores are on test folds the fold models never saw).",
         "",
         "## Trained domain",
+        # cards written before 3D models record no dimension: 2D, and their text stays as it was
+        *(["* 3D: spheres in a cubic box (a 2D snapshot is refused)."] if d.get("dim", 2) == 3 else []),
         f"* φ {d['phi'][0]:g}–{d['phi'][1]:g}, σ/σ0 {d['stress'][0]:g}–{d['stress'][1]:g}, "
         f"N {d['n_particles']}, "
         f"size ratio {d['size_ratio']}; " + _noise_text(card),
