@@ -100,7 +100,11 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian position noise per coordinate [a]")
     ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
     ap.add_argument(
-        "--section", default="lfdem_snapshots", help="the marked section of docs/validation/position_noise.md"
+        "--section", default="lfdem_snapshots", help="the marked section (default: docs/validation/position_noise.md's)"
+    )
+    ap.add_argument(
+        "--page",
+        help="the docs page of a new section (default: the page its record already names)",
     )
     ap.add_argument(
         "--lookup",
@@ -209,7 +213,7 @@ def main(argv=None) -> int:
         f"ms per snapshot); the scored runs took {seconds:.0f} s including reading and warm-up.\n\n"
         f"Command: `{command}`",
     ]
-    publish(args.section, blocks, not args.no_write, command=command)
+    publish(args.section, blocks, not args.no_write, page=args.page, command=command)
     return 0
 
 
