@@ -36,7 +36,9 @@ stress; NaN, with the reason in ``notes``, where that solve's shear rate vanishe
 stress), ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and
 ``z_mu_counted`` (the CLM's frictional contacts counted); ``jammed_fraction``: the share of training
 trajectories at the nearest trained state point that shear-jammed
-(rheograph.learn.jamming; jammed when >= 0.5).
+(rheograph.learn.jamming; jammed when >= 0.5).  With radii estimated from the configurations (``--radii
+estimated``, ``estimated-mean``): ``radii_uncertainty`` (their RMS uncertainty [a]) and
+``position_noise`` (the precision the model was told, the stated one and that uncertainty combined [a]).
 """
 
 from __future__ import annotations
