@@ -20,7 +20,8 @@ estimates' scatter over a trajectory (``estimate_scatter``).  One snapshot's est
 snapshot's own gaps: it sets its near pairs to about equal gaps, so its contacts open (on the 5 % runs at
 σ/σ0 = 100, 0.7 overlapping pairs per particle against the true 2.3) and a model reads a looser
 suspension than there is.  The mean over a trajectory is fitted mostly to other configurations than the
-one it is applied to, and its error acts as noise (1.2 contacts per particle there, with half the error).
+one it is applied to, and its error acts as noise (1.2 overlapping pairs per particle there, with half
+the error).
 """
 
 from __future__ import annotations
