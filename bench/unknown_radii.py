@@ -13,17 +13,20 @@ snapshots are given to the models with what an experiment knows instead of the t
 * ``species by size``: the species of a particle from its own (measured) radius against the geometric
   mean of the two nominal radii, then the nominal radius — misassigns the tails of a wide spread;
 * ``radii estimated``: the species known, and each snapshot's radii estimated from its configuration
-  (``rheograph.graphs.radii_estimate``: near pairs' distances by least squares, scaled to the stated φ).
+  (``rheograph.graphs.radii_estimate``: near pairs' distances by least squares, scaled to the stated φ);
+* ``radii estimated, mean``: the same, the radii the mean of the estimates over the run's kept snapshots.
 
 The exact models read the gaps the nominal radii make (overlaps of order p a between touching
-particles); the imaging models are told a position precision ``--declared-noise`` [a] and relax the
-configuration before reading it.  With the true radii (or estimated ones) the models read each
-particle's species from its size and everything else from the radii themselves, and flag the snapshot
-(trained on two exact radii).  Scores: R² of log10 η_r, log10 Π and Z_μ
-over the snapshots at strain >= ``--min-strain`` of all runs of one spread; the lookup row is the mean of
-the bidisperse training runs at each σ (``--lookup``), which reads no positions.  The table replaces the
-marked section ``unknown_radii`` of docs/imaging.md unless ``--no-write``; its numbers are kept in
-docs/results/bench/unknown_radii.json.
+particles); the imaging models given nominal radii are told a position precision ``--declared-noise``
+[a] and relax the configuration before reading it.  Given estimated radii, every model is told the
+precision ``predict_with_estimated_radii`` declares: the positions are the simulator's, exact, so it is
+the radii's uncertainty alone (the estimates' scatter over the run's kept snapshots), shown in the table.
+With the true radii (or estimated ones) the models read each particle's species from its size and
+everything else from the radii themselves, and flag the snapshot (trained on two exact radii). Scores:
+R² of log10 η_r, log10 Π and Z_μ over the snapshots at strain >= ``--min-strain`` of all runs of one
+spread; the lookup row is the mean of the bidisperse training runs at each σ (``--lookup``), which reads
+no positions. The table replaces the marked section ``unknown_radii`` of docs/imaging.md unless
+``--no-write``; its numbers are kept in docs/results/bench/unknown_radii.json.
 """
 
 from __future__ import annotations
@@ -39,7 +42,9 @@ from bench.publishing import command_line, publish, table
 from rheograph.errors import InputError
 
 NOMINAL = (1.0, 1.4)
-MODES = ("true radii", "species known", "species by size", "radii estimated")  # what the models are given
+# what the models are given
+MODES = ("true radii", "species known", "species by size", "radii estimated", "radii estimated, mean")
+ESTIMATED = ("radii estimated", "radii estimated, mean")
 
 
 def nominal_radii(radii: np.ndarray, n_small: int, how: str) -> np.ndarray:
@@ -53,17 +58,20 @@ def nominal_radii(radii: np.ndarray, n_small: int, how: str) -> np.ndarray:
     return np.where(small, NOMINAL[0], NOMINAL[1])
 
 
-def predict(model, snaps, keep, estimate: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
-    """(predictions (S, 3), the simulator's values (S, 3), share in domain) at the kept snapshots;
-    ``estimate``: each snapshot's radii estimated from its configuration first."""
-    if estimate:
-        table = model.predict_with_estimated_radii(snaps.select(keep))
+def predict(model, snaps, keep, how: str) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """(predictions (S, 3), the simulator's values (S, 3), share in domain, position precision told
+    [a], NaN where none is added) at the kept snapshots; ``how`` one of MODES: for the estimated ones the
+    radii are estimated from the kept snapshots' configurations first (each its own, or their mean)."""
+    told = np.nan
+    if how in ESTIMATED:
+        table = model.predict_with_estimated_radii(snaps.select(keep), mean=how == "radii estimated, mean")
         keep = np.ones(int(np.sum(keep)), dtype=bool)
+        told = float(table["position_noise"][0])
     else:
         table = model.predict_snapshots(snaps)
     pred = np.stack([table[f"{t}_pred"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]
     sim = np.stack([table[f"{t}_sim"] for t in ("eta", "pressure", "z_mu")], axis=1)[keep]
-    return pred, sim, float(np.mean(table["in_domain"][keep]))
+    return pred, sim, float(np.mean(table["in_domain"][keep])), told
 
 
 def main(argv=None) -> int:
@@ -74,7 +82,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", help="trajectories of polydisperse runs (globs)")
     ap.add_argument("--models", nargs="+", default=["N400_phi0.76", "N400_phi0.76_imaging"])
-    ap.add_argument("--declared-noise", type=float, default=0.05, help="told to the imaging models [a]")
+    ap.add_argument(
+        "--declared-noise",
+        type=float,
+        default=0.05,
+        help="told to the imaging models given nominal radii [a] (estimated radii: their own uncertainty)",
+    )
     ap.add_argument("--lookup", nargs="+", default=[], help="bidisperse trajectories at the same φ and N")
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument(
@@ -106,8 +119,9 @@ def main(argv=None) -> int:
         "",
         f"N = 400, φ = 0.76; snapshots at strain ≥ {args.min_strain:g} of runs with each species' radii "
         "spread Gaussian (relative spread p, truncated at 2p); R² log η_r / log Π / Z_μ over all runs of "
-        f"one spread; imaging models told ε = {args.declared_noise:g} a; in domain: the share of snapshots "
-        "the model does not flag.\n",
+        f"one spread; imaging models given nominal radii told ε = {args.declared_noise:g} a, every model "
+        "given estimated radii told their uncertainty (their scatter over the run's snapshots; the positions "
+        "are exact); in domain: the share of snapshots the model does not flag.\n",
     ]
     body = []
     for spread, runs in sorted(by_spread.items()):
@@ -115,24 +129,28 @@ def main(argv=None) -> int:
         truth, looked_up = [], []  # the simulator's values and the lookup's, snapshot by snapshot
         for how in args.radii:
             for name, model in models.items():
-                preds, sims, shares = [], [], []
+                preds, sims, shares, told = [], [], [], []
                 refused = None
                 for snaps, n_small in runs:
                     keep = snaps.strain >= args.min_strain
                     given = snaps
                     if how != "true radii":
-                        species = "species known" if how == "radii estimated" else how
+                        species = "species known" if how in ESTIMATED else how
                         given = _with_radii(snaps, nominal_radii(snaps.radii, n_small, species))
-                        if "imaging" in name:
+                        # the simulator's positions are exact; estimated radii add their own uncertainty
+                        if how in ESTIMATED:
+                            given.position_noise = 0.0
+                        elif "imaging" in name:
                             given.position_noise = args.declared_noise
                     try:
-                        pred, sim, share = predict(model, given, keep, estimate=how == "radii estimated")
+                        pred, sim, share, eps = predict(model, given, keep, how)
                     except InputError as exc:
                         refused = str(exc).split(":", 1)[-1].split("(found")[0].strip()
                         break
                     preds.append(pred)
                     sims.append(sim)
                     shares.append(share * keep.sum())
+                    told.append(eps)
                 key = f"{how} / {name}"
                 if refused:
                     rows[key] = {"refused": refused}
@@ -142,8 +160,12 @@ def main(argv=None) -> int:
                 r2 = scores(pred, sim)
                 share = float(np.sum(shares) / len(sim))
                 rows[key] = {"r2": list(r2), "in_domain": share, "snapshots": len(sim)}
+                label = how
+                if how in ESTIMATED:
+                    rows[key]["precision_told"] = told
+                    label += f" (ε told {min(told):.3f}–{max(told):.3f} a)"
                 body.append(
-                    [f"{spread:g}", how, f"`{name}`", f"{r2[0]:.3f}", f"{r2[1]:.4f}", f"{r2[2]:.4f}"]
+                    [f"{spread:g}", label, f"`{name}`", f"{r2[0]:.3f}", f"{r2[1]:.4f}", f"{r2[2]:.4f}"]
                     + [f"{share:.2f}"]
                 )
         if lookup:

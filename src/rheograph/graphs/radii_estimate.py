@@ -13,6 +13,15 @@ fraction, which removes the small bias of the gaps.  On the committed polydisper
 one snapshot's estimate cuts the radii's error to a third or less: 4.2 % → 1.1–1.4 % RMS at a 5 %
 spread, 8.5 % → 2.1–2.7 % at 10 % (``tests/test_radii.py``); the mean over a trajectory's 20 steady
 snapshots, 0.6 % and 1.7 %.  The floor, from the gaps, is ~1 % (1.2 % on an exactly bidisperse snapshot).
+
+A radius error acts on the gaps as position noise of the same size (``declared_precision``), and a model
+that reads the positions' precision is told the two combined, the radii's uncertainty measured from the
+estimates' scatter over a trajectory (``estimate_scatter``).  One snapshot's estimate is fitted to that
+snapshot's own gaps: it sets its near pairs to about equal gaps, so its contacts open (on the 5 % runs at
+σ/σ0 = 100, 0.7 overlapping pairs per particle against the true 2.3) and a model reads a looser
+suspension than there is.  The mean over a trajectory is fitted mostly to other configurations than the
+one it is applied to, and its error acts as noise (1.2 overlapping pairs per particle there, with half
+the error).
 """
 
 from __future__ import annotations
@@ -84,26 +93,81 @@ def species_spread(radii, size_ratio: float) -> float:
     return float(np.sqrt(np.mean((radii / species_size(radii, size_ratio) - 1.0) ** 2)))
 
 
-def snapshots_with_estimated_radii(snaps: Snapshots, mean: bool = False) -> list[Snapshots]:
-    """``snaps`` with radii estimated from the configurations (``estimate_radii``), the radii it holds
-    taken as each particle's species' nominal radius (1 or its size ratio; other radii are refused).  One
-    single-snapshot copy per snapshot, each with its own estimate; with ``mean``, one copy of all the
-    snapshots with the mean estimate over them (the snapshots must show the same particles in the same
-    order, as a simulation's or linked tracks do: the mean error falls as more snapshots are averaged)."""
+def estimate_scatter(estimates) -> float:
+    """RMS deviation [a] of single-snapshot radius estimates (S, N) from their mean over the S >= 2
+    snapshots (unbiased: x S / (S - 1)), the estimates of the same particles in the same order.
+
+    What one snapshot's estimate is uncertain by: its error comes from the gaps of that snapshot's near
+    pairs, which change as the suspension flows, so its scatter over a trajectory measures it without
+    the true radii.  On the committed polydisperse runs (the 20 snapshots at strain >= 1 of each) it is
+    0.011-0.013 a against a true RMS error of 0.012-0.014 a at a 5 % spread, 0.019-0.023 a against
+    0.027-0.029 a at 10 % (part of the error there persists: below).  The mean's error is 0.006 a at 5 %
+    but 0.019-0.021 a at 10 %, about the scatter: what persists from snapshot to snapshot (a particle's
+    environment; a radius so far off its nominal value that the first shell misses its neighbours, 2-3 %
+    of the particles at 10 %) does not average out and cannot be seen in the scatter."""
+    estimates = np.asarray(estimates, dtype=np.float64)
+    if estimates.ndim != 2 or estimates.shape[0] < 2:
+        raise InputError(
+            f"estimate_scatter: estimates of at least 2 snapshots (S, N) are needed (found shape "
+            f"{estimates.shape})"
+        )
+    deviation = estimates - estimates.mean(axis=0)
+    return float(np.sqrt(np.sum(deviation**2) / (deviation.size - estimates.shape[1])))
+
+
+def declared_precision(stated, radii_uncertainty: float):
+    """The position precision [a] (RMS per coordinate) to tell a model reading estimated radii: the
+    positions' own ``stated`` precision (one for all snapshots, or (S,)) and the radii's RMS uncertainty
+    [a] in quadrature.
+
+    An error d_i in a radius shifts the surface gap of each pair (i, j) by -(d_i + d_j), variance
+    2 s**2 for independent errors of RMS s; noise of eps per coordinate in the positions shifts it by the
+    difference of two displacements along the pair's normal, variance 2 eps**2.  So radii uncertain by s
+    blur the gaps as positions uncertain by eps = s do.  None (precision not stated) stays None: a model
+    that reads the precision then asks for it."""
+    if stated is None:
+        return None
+    combined = np.hypot(stated, radii_uncertainty)
+    return float(combined) if np.ndim(combined) == 0 else combined
+
+
+def snapshots_with_estimated_radii(snaps: Snapshots, mean: bool = False) -> tuple[list[Snapshots], float]:
+    """(``snaps`` with radii estimated from the configurations (``estimate_radii``), the RMS uncertainty
+    [a] of the radii given them).  The radii ``snaps`` holds are taken as each particle's species' nominal
+    radius (1 or its size ratio; other radii are refused).  One single-snapshot copy per snapshot, each
+    with its own estimate; with ``mean``, one copy of all the snapshots with the mean estimate over them.
+    Either way the snapshots must show the same particles in the same order (a simulation's, or linked
+    tracks): the uncertainty is the estimates' scatter over them (``estimate_scatter``; at least 2
+    snapshots), and the copies' stated position precision (and axial one, 3D) is combined with it
+    (``declared_precision``), so that a model reading the precision reads the radii's error as the
+    position noise it equals."""
     size_ratio = float(snaps.params.get("size_ratio", snaps.radii.max()))
     if species_spread(snaps.radii, size_ratio) > 1e-9:
         raise InputError(
             f"{snaps.source}: estimating the radii starts from each particle's species' nominal radius (1 or "
             f"the size ratio {size_ratio:g}); these radii spread about them: give the nominal radii"
         )
+    if len(snaps) < 2:
+        raise InputError(
+            f"{snaps.source}: holds {len(snaps)} snapshot(s); the estimated radii's uncertainty is measured "
+            "from their scatter over snapshots of the same particles: give at least 2 (a trajectory or "
+            "linked tracks)"
+        )
     boxes = [
         (snaps.lx, snaps.ly, *(() if snaps.lz is None else (snaps.lz,)), float(offset))
         for offset in snaps.le_offset
     ]
     estimates = [estimate_radii(p, snaps.radii, box, snaps.phi) for p, box in zip(snaps.positions, boxes)]
+    uncertainty = estimate_scatter(estimates)
+    precision = {"position_noise": declared_precision(snaps.position_noise, uncertainty)}
+    if snaps.axial_noise is not None:
+        precision["axial_noise"] = declared_precision(snaps.axial_noise, uncertainty)
+    declared = dataclasses.replace(snaps, **precision)
     if mean:
-        return [dataclasses.replace(snaps, radii=np.mean(estimates, axis=0), contacts=None)]
-
-    return [
-        dataclasses.replace(snaps.select(slice(k, k + 1)), radii=radii) for k, radii in enumerate(estimates)
-    ]
+        parts = [dataclasses.replace(declared, radii=np.mean(estimates, axis=0), contacts=None)]
+    else:
+        parts = [
+            dataclasses.replace(declared.select(slice(k, k + 1)), radii=radii)
+            for k, radii in enumerate(estimates)
+        ]
+    return parts, uncertainty

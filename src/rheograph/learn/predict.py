@@ -36,7 +36,9 @@ stress; NaN, with the reason in ``notes``, where that solve's shear rate vanishe
 stress), ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā δ / δ_σ [σ0]) and
 ``z_mu_counted`` (the CLM's frictional contacts counted); ``jammed_fraction``: the share of training
 trajectories at the nearest trained state point that shear-jammed
-(rheograph.learn.jamming; jammed when >= 0.5).
+(rheograph.learn.jamming; jammed when >= 0.5).  With radii estimated from the configurations (``--radii
+estimated``, ``estimated-mean``): ``radii_uncertainty`` (their RMS uncertainty [a]) and
+``position_noise`` (the precision the model was told, the stated one and that uncertainty combined [a]).
 """
 
 from __future__ import annotations
@@ -338,12 +340,25 @@ class Surrogate:
     ) -> dict:
         """``predict_snapshots`` on ``snaps`` whose radii are the species' nominal ones (a sample whose
         particles spread in size unmeasured), each snapshot with radii estimated from its configuration
-        (``rheograph.graphs.radii_estimate``); ``mean``: one estimate, the mean over the snapshots (the
-        same particles in the same order in each).  The model flags radii that spread about the two
-        species: what it makes of them is measured, not trained (docs/imaging.md, unknown sizes)."""
-        parts = snapshots_with_estimated_radii(snaps, mean)
+        (``rheograph.graphs.radii_estimate``); ``mean``: one estimate, the mean over the snapshots.  The
+        snapshots (at least 2) must show the same particles in the same order: the radii's uncertainty
+        is measured from the estimates' scatter over them, and the model is told the positions' stated
+        precision and that uncertainty combined (``declared_precision``: a radius error blurs the gaps as
+        position noise of its size).  The table gains ``radii_uncertainty`` [a] and ``position_noise``,
+        the precision the model was told [a] (NaN where the source states none).  The model flags radii
+        that spread about the two species: what it makes of them is measured, not trained
+        (docs/imaging.md, unknown sizes)."""
+        parts, uncertainty = snapshots_with_estimated_radii(snaps, mean)
         table = concatenate([self.predict_snapshots(part, accept_mismatch) for part in parts])
-        table["snapshot"] = np.arange(len(table["snapshot"]))
+        n = len(table["snapshot"])
+        table["snapshot"] = np.arange(n)
+        table["radii_uncertainty"] = np.full(n, uncertainty)
+        table["position_noise"] = np.concatenate(
+            [
+                np.broadcast_to(np.nan if p.position_noise is None else p.position_noise, (len(p),))
+                for p in parts
+            ]
+        ).astype(np.float64)
         return table
 
     def predict_snapshots(self, snaps: Snapshots, accept_mismatch: bool = False) -> dict:
@@ -594,7 +609,9 @@ def main(argv=None) -> None:
         default="given",
         help="given (default): the inputs' radii; estimated: the inputs' radii are the species' nominal ones "
         "and each snapshot's are estimated from its configuration (particles spread in size, unmeasured); "
-        "estimated-mean: one estimate, the mean over a file's snapshots (the same particles in each)",
+        "estimated-mean: one estimate, the mean over a file's snapshots.  Either estimate needs at least 2 "
+        "snapshots of the same particles per file, adds the radii's uncertainty (their scatter) to the "
+        "stated position precision, and is documented in docs/imaging.md (estimated-mean reads better)",
     )
     ap.add_argument(
         "--accept-mismatch",
