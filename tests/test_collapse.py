@@ -79,6 +79,8 @@ def test_a_different_amplitude_and_contact_number_are_measured_not_collapsed(tmp
     data, _ = _run(tmp_path, three_amplitude=3.0, three_z_mu=3.5)
     assert {round(m["eta_ratio"], 6) for m in data["matched"]} == {3.0}
     assert {round(m["z_mu_difference"], 9) for m in data["matched"]} == {1.5}
+    # 3.5 of the spheres' 4 against 2 of the discs' 3: (3.5 / 4) / (2 / 3)
+    assert {round(m["z_mu_isostatic_ratio"], 9) for m in data["matched"]} == {round(3.5 * 3 / 8, 9)}
 
 
 def test_interpolation_is_exact_for_a_power_law_and_refuses_to_extrapolate():

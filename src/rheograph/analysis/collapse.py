@@ -36,6 +36,12 @@ DEFAULT_METHOD = "divergence, beta = 2"
 QUANTITIES = ("eta", "pressure_ratio", "z_mu")  # eta_r, Pi/sigma, Z_mu
 LABELS = {"eta": r"$\eta_r$", "pressure_ratio": r"$\Pi/\sigma$", "z_mu": r"$Z_\mu$"}
 LOGARITHMIC = {"eta": True, "pressure_ratio": True, "z_mu": False}
+# the isostatic coordination of frictional grains, d + 1: Z_mu measured against it compares discs and
+# spheres at the same share of what rigidity needs
+ISOSTATIC_FRICTIONAL = {2: 3.0, 3: 4.0}
+# Z_mu / (d + 1) is compared where the 2D state point is frictional (below it the ratio of two small
+# counts says little)
+FRICTIONAL_Z_MU = 1.0
 
 
 def frictional_jamming_point(runs: list[dict], dim: int, n: int, method: str, n_boot: int) -> dict:
@@ -119,6 +125,9 @@ def matched(two: list[dict], three: list[dict]) -> list[dict]:
                 "eta_ratio": s3["eta"] / values["eta"],
                 "pressure_ratio": s3["pressure_ratio"] / values["pressure_ratio"],
                 "z_mu_difference": s3["z_mu"] - values["z_mu"],
+                # against each dimension's isostatic frictional coordination d + 1
+                "z_mu_isostatic_ratio": (s3["z_mu"] / ISOSTATIC_FRICTIONAL[3])
+                / (values["z_mu"] / ISOSTATIC_FRICTIONAL[2]),
             }
         )
     return rows
@@ -179,6 +188,16 @@ def section_blocks(data: dict, command: str) -> list[dict]:
         ):
             v = np.array([m[key] for m in data["matched"]])
             summary.append([label, f"{np.median(v):.3g}", f"{v.min():.3g}–{v.max():.3g}"])
+        frictional = [m for m in data["matched"] if m["two"]["z_mu"] >= FRICTIONAL_Z_MU]
+        if frictional:
+            v = np.array([m["z_mu_isostatic_ratio"] for m in frictional])
+            summary.append(
+                [
+                    f"Z_μ/(d + 1) 3D / 2D (where 2D Z_μ ≥ {FRICTIONAL_Z_MU:g}: {len(v)} points)",
+                    f"{np.median(v):.3g}",
+                    f"{v.min():.3g}–{v.max():.3g}",
+                ]
+            )
     blocks = [{"text": intro}, table_block(header, body)]
     if summary:
         blocks += [{"text": ""}, table_block(["at equal σ and Δφ", "median", "range"], summary)]
