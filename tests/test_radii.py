@@ -1,6 +1,8 @@
 """Radii estimated from a configuration (rheograph.graphs.radii_estimate): exact on touching lattices in 2D
 and 3D (closed form: every pair at 2a), and on the committed polydisperse runs a fraction of the error of
-the nominal radii; bad input refused by name."""
+the nominal radii; bad input refused by name.  A bare file of nominal radii and a measured phi: read when
+it declares them (radii_nominal, predict.py --radii estimated-mean) and predicted as the benchmark's path,
+refused in one line when it does not or when its phi lies beyond the tolerance."""
 
 import dataclasses
 from pathlib import Path
