@@ -1,6 +1,8 @@
 """Radii estimated from a configuration (rheograph.graphs.radii_estimate): exact on touching lattices in 2D
 and 3D (closed form: every pair at 2a), and on the committed polydisperse runs a fraction of the error of
-the nominal radii; bad input refused by name."""
+the nominal radii; bad input refused by name.  A bare file of nominal radii and a measured phi: read when
+it declares them (radii_nominal, predict.py --radii estimated-mean) and predicted as the benchmark's path,
+refused in one line when it does not or when its phi lies beyond the tolerance."""
 
 import dataclasses
 from pathlib import Path
@@ -16,8 +18,9 @@ from rheograph.graphs.radii_estimate import (
     near_pairs,
     snapshots_with_estimated_radii,
 )
+from rheograph.io.configurations import area_fraction
 from rheograph.io.hdf5 import read_run_info
-from rheograph.io.snapshots import read_snapshots
+from rheograph.io.snapshots import read_snapshots, write_bare
 
 ROOT = Path(__file__).resolve().parents[1]
 POLYDISPERSE = ROOT / "data" / "polydisperse" / "multirun"
@@ -214,3 +217,146 @@ def test_a_model_given_spread_radii_predicts_and_flags_them():
     assert estimated["position_noise"] == pytest.approx(estimated["radii_uncertainty"])
     assert 0.005 < estimated["radii_uncertainty"][0] < 0.05
     assert "positions known to" in estimated["notes"][0]
+
+
+# ---- a bare file of nominal radii and a measured phi ----------------------------------------------
+NOMINAL_RUN = POLYDISPERSE / "N400_phi0.76_s20_poly0.1_seed1_d0.002_implicit" / "trajectory.h5"
+
+
+@pytest.fixture(scope="module")
+def microscope_file(tmp_path_factory):
+    """What a microscope gives of the 10 % polydisperse run at sigma/sigma0 = 20: its last 3 snapshots
+    with each particle's species' nominal radius (1 or 1.4) and the sample's true phi 0.76 (measured
+    apart; the nominal radii give 0.7505), written as a bare file without the declaration; with the
+    snapshots the benchmark gives the models (bench/unknown_radii.py)."""
+    import bench.unknown_radii as bench
+
+    snaps = read_snapshots(NOMINAL_RUN)
+    given = bench._with_radii(snaps, nominal_of(NOMINAL_RUN, snaps))
+    given.position_noise = 0.0  # the simulator's positions are exact
+    keep = np.arange(len(snaps)) >= len(snaps) - 3
+    path = tmp_path_factory.mktemp("microscope") / "nominal.npz"
+    write_bare(path, given.select(keep))
+    return path, given, keep
+
+
+def declared(path: Path, tmp_path: Path, **change) -> Path:
+    """A copy of the bare file ``path`` declaring its radii nominal, with keys changed."""
+    values = dict(np.load(path))
+    values.update({"radii_nominal": 1, **change})
+    out = tmp_path / "declared.npz"
+    np.savez(out, **values)
+    return out
+
+
+def test_a_file_declaring_nominal_radii_predicts_as_the_benchmark_with_the_true_phi(
+    microscope_file, tmp_path
+):
+    """Read from a bare file that declares its radii nominal (radii_nominal = 1), the measured phi
+    stands: the mean radius estimate is scaled to it and the imaging model predicts what the
+    benchmark's 'radii estimated, mean' row predicts from the trajectory's own phi, to round-off."""
+    import bench.unknown_radii as bench
+    import rheograph
+
+    path, given, keep = microscope_file
+    snaps = read_snapshots(declared(path, tmp_path))
+    assert snaps.radii_nominal and snaps.phi == 0.76
+    assert area_fraction(snaps.radii, snaps.lx, snaps.ly) == pytest.approx(0.7505, abs=1e-4)
+    model = rheograph.load_model("N400_phi0.76_imaging")
+    table = model.predict_with_estimated_radii(snaps, mean=True)
+    expected, _, _, told = bench.predict(model, given, keep, "radii estimated, mean")
+    predicted = np.stack([table[f"{t}_pred"] for t in ("eta", "pressure", "z_mu")], axis=1)
+    np.testing.assert_allclose(predicted, expected, rtol=1e-9)
+    assert table["position_noise"] == pytest.approx(np.full(3, told), rel=1e-12)
+    assert (table["phi"] == 0.76).all()
+
+
+def test_predict_cli_estimating_radii_declares_them_nominal(microscope_file, tmp_path):
+    """predict.py --radii estimated-mean reads the undeclared file's radii as nominal and its phi as
+    measured (the same predictions as the declared file); --radii given refuses it in one line."""
+    import csv
+
+    import rheograph
+    from rheograph.learn.predict import main
+
+    path, _, _ = microscope_file
+    out = tmp_path / "p.csv"
+    main(
+        [
+            "--models",
+            "N400_phi0.76_imaging",
+            "--input",
+            str(path),
+            "--out",
+            str(out),
+            "--radii",
+            "estimated-mean",
+        ]
+    )
+    rows = list(csv.DictReader(line for line in out.read_text().splitlines() if not line.startswith("#")))
+    model = rheograph.load_model("N400_phi0.76_imaging")
+    table = model.predict_with_estimated_radii(read_snapshots(declared(path, tmp_path)), mean=True)
+    assert [float(r["eta_pred"]) for r in rows] == pytest.approx(table["eta_pred"], rel=1e-6)
+    with pytest.raises(InputError, match=r"phi = 0\.76 but the radii and box give an area fraction 0\.7505"):
+        main(["--models", "N400_phi0.76_imaging", "--input", str(path), "--out", str(out)])
+
+
+def test_nominal_radii_and_a_measured_phi_undeclared_are_refused_in_one_line(microscope_file):
+    path, _, _ = microscope_file
+    with pytest.raises(InputError) as refused:
+        read_snapshots(path)
+    text = str(refused.value)
+    assert "\n" not in text and text.startswith(
+        f"{path}: phi = 0.76 but the radii and box give an area fraction 0.7505"
+    )
+    assert "radii_nominal = 1" in text and "--radii estimated-mean" in text
+
+
+@pytest.mark.parametrize("phi, accepted", [(0.785, True), (0.73, True), (0.80, False), (0.71, False)])
+def test_a_declared_nominal_file_is_held_to_five_per_cent_of_its_radii_phi(
+    microscope_file, tmp_path, phi, accepted
+):
+    """The nominal radii give 0.7505: a measured phi within 5 % of it (0.785: +4.6 %, 0.73: -2.7 %) is
+    taken, one beyond (0.80: +6.6 %, 0.71: -5.4 %) is refused in one line naming both."""
+    path = declared(microscope_file[0], tmp_path, phi=phi)
+    if accepted:
+        assert read_snapshots(path).phi == phi
+        return
+    with pytest.raises(
+        InputError, match=rf"phi = {phi:g} but the nominal radii and box give an area fraction 0\.7505"
+    ) as refused:
+        read_snapshots(path)
+    assert "\n" not in str(refused.value) and "beyond the 5%" in str(refused.value)
+
+
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        (2, "radii_nominal = 2: allowed 0 or 1"),
+        (-1, "radii_nominal = -1: allowed 0 or 1"),
+        (0.5, "radii_nominal = 0.5: allowed 0 or 1"),
+        (np.nan, "'radii_nominal' = nan is not finite"),
+        ("yes", "'radii_nominal' must be numbers"),
+        (np.array([1, 1]), "'radii_nominal' must be one number"),
+        (np.ones(3, dtype=complex), "'radii_nominal' must be real numbers"),
+    ],
+)
+def test_a_bad_radii_nominal_value_is_one_line(microscope_file, tmp_path, value, message):
+    path = declared(microscope_file[0], tmp_path, radii_nominal=value)
+    with pytest.raises(InputError, match=message) as refused:
+        read_snapshots(path)
+    assert "\n" not in str(refused.value) and str(refused.value).startswith(f"{path}: ")
+
+
+def test_declared_nominal_radii_are_not_read_as_given_and_round_trip(microscope_file, tmp_path):
+    """A model is not given radii declared nominal as though they were each particle's own (it names
+    the estimate); write_bare keeps the declaration; radii_nominal = 0 is the strict default."""
+    import rheograph
+
+    snaps = read_snapshots(declared(microscope_file[0], tmp_path))
+    with pytest.raises(InputError, match="declared nominal .*--radii estimated-mean"):
+        rheograph.load_model("N400_phi0.76_imaging").predict_snapshots(snaps)
+    write_bare(tmp_path / "again.npz", snaps)
+    assert read_snapshots(tmp_path / "again.npz").radii_nominal
+    with pytest.raises(InputError, match="radii_nominal = 1"):
+        read_snapshots(declared(microscope_file[0], tmp_path, radii_nominal=0))

@@ -229,6 +229,12 @@ def snapshot_graphs(
     edges) are split between that many processes; the graphs are the same."""
     snaps = source if isinstance(source, Snapshots) else read_snapshots(source)
     path = snaps.source
+    if snaps.radii_nominal:
+        raise InputError(
+            f"{path}: its radii are declared nominal (radii_nominal): graphs read each particle's own "
+            "radius; estimate them from the configurations (predict.py --radii estimated-mean, "
+            "model.predict_with_estimated_radii; docs/imaging.md)"
+        )
     three_d = snaps.dim == 3
     only_3d = [name for name in settings.edge_features if name in EDGE_FEATURES_3D_ONLY]
     if only_3d and not three_d:

@@ -134,7 +134,8 @@ def declared_precision(stated, radii_uncertainty: float):
 def snapshots_with_estimated_radii(snaps: Snapshots, mean: bool = False) -> tuple[list[Snapshots], float]:
     """(``snaps`` with radii estimated from the configurations (``estimate_radii``), the RMS uncertainty
     [a] of the radii given them).  The radii ``snaps`` holds are taken as each particle's species' nominal
-    radius (1 or its size ratio; other radii are refused).  One single-snapshot copy per snapshot, each
+    radius (1 or its size ratio; other radii are refused) and its ``phi`` the sample's (measured)
+    fraction, which the estimates are scaled to give.  One single-snapshot copy per snapshot, each
     with its own estimate; with ``mean``, one copy of all the snapshots with the mean estimate over them.
     Either way the snapshots must show the same particles in the same order (a simulation's, or linked
     tracks): the uncertainty is the estimates' scatter over them (``estimate_scatter``; at least 2
@@ -162,7 +163,8 @@ def snapshots_with_estimated_radii(snaps: Snapshots, mean: bool = False) -> tupl
     precision = {"position_noise": declared_precision(snaps.position_noise, uncertainty)}
     if snaps.axial_noise is not None:
         precision["axial_noise"] = declared_precision(snaps.axial_noise, uncertainty)
-    declared = dataclasses.replace(snaps, **precision)
+    # the copies' radii are estimates of each particle's own, no longer the nominal ones
+    declared = dataclasses.replace(snaps, radii_nominal=False, **precision)
     if mean:
         parts = [dataclasses.replace(declared, radii=np.mean(estimates, axis=0), contacts=None)]
     else:

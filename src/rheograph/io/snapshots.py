@@ -14,7 +14,10 @@ Three kinds of source (``read_snapshots`` tells them apart by their content and 
   (S, N, 3) or (N, 3) (x flow, y gradient, z vorticity), ``box`` (3,) = (Lx, Ly, Lz) and ``phi`` the
   volume fraction; its optional ``dim`` (2 or 3) must agree; its optional ``axial_noise`` [a] is the
   precision along a confocal microscope's optical axis (the model's ``graph.optical_axis``), with
-  ``position_noise`` then the in-plane one;
+  ``position_noise`` then the in-plane one; optional ``radii_nominal`` (0 or 1): 1 declares the radii
+  each particle's species' nominal radius (sizes spread, unmeasured) and ``phi`` the sample's measured
+  fraction, which the radii then need give only to within ``NOMINAL_PHI_TOLERANCE`` (such snapshots are
+  read with radii estimated from the configurations, ``rheograph.graphs.radii_estimate``);
 * an **LF_DEM run**: its ``par_*.dat`` (plain or ``.gz``), see ``rheograph.io.lfdem``.
 
 Positions are wrapped into rheograph's box [-Lx/2, Lx/2) x [-Ly/2, Ly/2) with the Lees–Edwards images
@@ -68,8 +71,14 @@ BARE_REQUIRED_PARAMS = ("mu", "kn_coefficient", "kt_ratio", "delta", "lub_max_ga
 # the step a source was made with, are recorded by write_bare beside disp_max
 BARE_KEYS = (
     "positions", "radii", "box", "le_offset", "stress", "phi", *PHYSICAL_PARAMS, "strain", *TARGET_KEYS,
-    "position_noise", "axial_noise", "disp_max", "dt_max", "lagged_step_control", "dim",
+    "position_noise", "axial_noise", "disp_max", "dt_max", "lagged_step_control", "dim", "radii_nominal",
 )  # fmt: skip
+# what a bare file whose stated phi disagrees with its radii is told, besides checking the box and units
+NOMINAL_REMEDY = (
+    "; if the radii are the species' nominal ones (particles spread in size, unmeasured) and phi is the "
+    "measured fraction, declare them: key radii_nominal = 1, or predict.py --radii estimated-mean "
+    "(docs/imaging.md)"
+)
 KIND_NAMES = {"rheograph": "a rheograph trajectory", "bare": "a bare snapshot file", "lfdem": "an LF_DEM run"}
 
 
@@ -228,10 +237,12 @@ def _scalar(values: dict, key: str, where: str) -> float:
     return value
 
 
-def read_bare(path: str | Path, params: dict | None = None) -> Snapshots:
+def read_bare(path: str | Path, params: dict | None = None, radii_nominal: bool = False) -> Snapshots:
     """A bare snapshot file (module docstring lists its keys); ``params``: physical parameters given
-    beside the file, which supply or replace its own."""
-    return snapshots_from_values({**_bare_values(Path(path)), **(params or {})}, str(path), kind="bare")
+    beside the file, which supply or replace its own; ``radii_nominal``: the caller declares the file's
+    radii nominal (as its key ``radii_nominal`` = 1 does)."""
+    values = {**_bare_values(Path(path)), **(params or {})}
+    return snapshots_from_values(values, str(path), kind="bare", radii_nominal=radii_nominal)
 
 
 def unknown_keys_warning(keys, where: str) -> str | None:
@@ -251,9 +262,12 @@ def unknown_keys_warning(keys, where: str) -> str | None:
     )
 
 
-def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snapshots:
+def snapshots_from_values(
+    values: dict, where: str, kind: str = "bare", radii_nominal: bool = False
+) -> Snapshots:
     """``Snapshots`` from the keys of a bare snapshot file (module docstring), checked; ``where`` names
-    the source in messages.  Keys it does not know are named in a warning (``unknown_keys_warning``)."""
+    the source in messages.  Keys it does not know are named in a warning (``unknown_keys_warning``).
+    ``radii_nominal``: the radii are declared nominal by the caller (else only by the key of that name)."""
     warning = unknown_keys_warning(values, where)
     if warning:
         log.warning("%s", warning)
@@ -304,7 +318,16 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
     stress = _scalar(values, "stress", where) if values.get("stress") is not None else float("nan")
     if stress <= 0:
         raise InputError(f"{where}: stress = {stress:g} must be > 0 (σ/σ0)")
-    check_geometry(where, radii, lx, ly, phi, lz)
+    if values.get("radii_nominal") is not None:
+        declared = _scalar(values, "radii_nominal", where)
+        if declared not in (0.0, 1.0):
+            raise InputError(
+                f"{where}: radii_nominal = {declared:g}: allowed 0 or 1 (1: the radii are each species' "
+                "nominal radius and phi the measured fraction, docs/data_format.md)"
+            )
+        radii_nominal = radii_nominal or declared == 1.0
+    remedy = NOMINAL_REMEDY if kind == "bare" else ""
+    check_geometry(where, radii, lx, ly, phi, lz, nominal=radii_nominal, remedy=remedy)
     params = {key: _scalar(values, key, where) for key in PHYSICAL_PARAMS if key in values}
     measured_ratio = size_ratio(radii)
     if "size_ratio" in params and not math.isclose(params["size_ratio"], measured_ratio, rel_tol=1e-5):
@@ -361,6 +384,7 @@ def snapshots_from_values(values: dict, where: str, kind: str = "bare") -> Snaps
         position_noise=noise,
         lz=lz,
         axial_noise=axial,
+        radii_nominal=bool(radii_nominal),
     )
 
 
@@ -376,6 +400,7 @@ def write_bare(path: str | Path, snapshots: Snapshots) -> None:
         "strain": snapshots.strain,
         **({} if snapshots.position_noise is None else {"position_noise": snapshots.position_noise}),
         **({} if snapshots.axial_noise is None else {"axial_noise": snapshots.axial_noise}),
+        **({"radii_nominal": 1} if snapshots.radii_nominal else {}),
         **{k: v for k, v in snapshots.params.items()},
         **{key: snapshots.targets[:, k] for k, key in enumerate(TARGET_KEYS)},
         **snapshots.numerics,
@@ -412,28 +437,36 @@ def source_kind(path: str | Path) -> str:
 
 
 def read_snapshots(
-    path: str | Path, lfdem_params: str | Path | None = None, params: dict | None = None
+    path: str | Path,
+    lfdem_params: str | Path | None = None,
+    params: dict | None = None,
+    radii_nominal: bool = False,
 ) -> Snapshots:
     """The snapshots of any source (module docstring); ``lfdem_params``: LF_DEM's parameter file, for
     LF_DEM runs (``rheograph.io.lfdem.read_lfdem``); ``params``: physical parameters (``sim.*`` names)
-    given beside the source, which supply or replace those it carries."""
+    given beside the source, which supply or replace those it carries; ``radii_nominal``: the caller
+    declares a bare file's radii the species' nominal ones and its phi measured (as the file's key
+    ``radii_nominal`` = 1 does; a trajectory's or LF_DEM run's radii are the ones it simulated, and its phi
+    is checked against them as ever)."""
     unknown = sorted(set(params or {}) - set(PHYSICAL_PARAMS))
     if unknown:
         raise InputError(f"{path}: unknown physical parameter(s) {unknown}; they are {list(PHYSICAL_PARAMS)}")
-    snaps = _read_source(path, lfdem_params, params or {})
+    snaps = _read_source(path, lfdem_params, params or {}, radii_nominal)
     if params:
         snaps.params = {**snaps.params, **params}
     return snaps
 
 
-def _read_source(path: str | Path, lfdem_params: str | Path | None, params: dict) -> Snapshots:
+def _read_source(
+    path: str | Path, lfdem_params: str | Path | None, params: dict, radii_nominal: bool
+) -> Snapshots:
     kind = source_kind(path)
     if kind != "lfdem" and lfdem_params is not None:
         raise InputError(f"{path}: an LF_DEM parameter file was given, but this is not an LF_DEM par_*.dat")
     try:
         if kind == "lfdem":
             return read_lfdem(path, lfdem_params)
-        return read_trajectory(path) if kind == "rheograph" else read_bare(path, params)
+        return read_trajectory(path) if kind == "rheograph" else read_bare(path, params, radii_nominal)
     except InputError:
         raise
     except DAMAGED_FILE_ERRORS as exc:

@@ -37,7 +37,8 @@ stress), ``pressure_spring`` (the contact-spring pressure (2π σ / A) Σ r ā �
 ``z_mu_counted`` (the CLM's frictional contacts counted); ``jammed_fraction``: the share of training
 trajectories at the nearest trained state point that shear-jammed
 (rheograph.learn.jamming; jammed when >= 0.5).  With radii estimated from the configurations (``--radii
-estimated``, ``estimated-mean``): ``radii_uncertainty`` (their RMS uncertainty [a]) and
+estimated``, ``estimated-mean``, which declare the inputs' radii the species' nominal ones, as a bare
+file's key ``radii_nominal`` = 1 does): ``radii_uncertainty`` (their RMS uncertainty [a]) and
 ``position_noise`` (the precision the model was told, the stated one and that uncertainty combined [a]).
 """
 
@@ -56,7 +57,7 @@ import torch
 from rheograph.errors import InputError
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
 from rheograph.graphs.radii_estimate import snapshots_with_estimated_radii, species_spread
-from rheograph.io.configurations import PHYSICAL_PARAMS, Snapshots
+from rheograph.io.configurations import NOMINAL_PHI_TOLERANCE, PHYSICAL_PARAMS, Snapshots
 from rheograph.io.snapshots import read_snapshots, snapshots_from_values
 from rheograph.io.tables import write_table
 from rheograph.learn.bundle import load_bundle, predict_dataset
@@ -608,7 +609,9 @@ def main(argv=None) -> None:
         choices=RADII_CHOICES,
         default="given",
         help="given (default): the inputs' radii; estimated: the inputs' radii are the species' nominal ones "
-        "and each snapshot's are estimated from its configuration (particles spread in size, unmeasured); "
+        "(a bare file's phi the measured fraction, which they need give only to within "
+        f"{NOMINAL_PHI_TOLERANCE:.0%}%) and each snapshot's are estimated from its configuration (particles "
+        "spread in size, unmeasured); "
         "estimated-mean: one estimate, the mean over a file's snapshots.  Either estimate needs at least 2 "
         "snapshots of the same particles per file, adds the radii's uncertainty (their scatter) to the "
         "stated position precision, and is documented in docs/imaging.md (estimated-mean reads better)",
@@ -659,7 +662,8 @@ def main(argv=None) -> None:
     given = dict(_parse_param(p) for p in args.param)
     tables = []
     for path in args.input:
-        snaps = read_snapshots(path, args.lfdem_params, given)
+        # estimating the radii declares the inputs' radii nominal: a bare file's phi is the measured one
+        snaps = read_snapshots(path, args.lfdem_params, given, radii_nominal=args.radii != "given")
         if args.position_noise is not None:
             snaps.position_noise = args.position_noise
         if args.axial_noise is not None:
