@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.records import DOCS, RECORDS
-from rheograph.analysis import dataset_card, flow_curves, jamming_points
+from rheograph.analysis import collapse, dataset_card, flow_curves, jamming_points
 from rheograph.errors import InputError
 from rheograph.io.figures import data_hash, drawn_from_hash, png_size, save_png
 from rheograph.io.pages import read_record, write_record
@@ -328,6 +328,10 @@ FIGURES: dict[str, Figure] = {
     "figures/phase_diagram.png": Figure(
         jamming_points.draw_phase_diagram, "jamming_fits.json", "figure", jamming_points.DPI
     ),
+    "figures/phase_diagram_3d.png": Figure(
+        jamming_points.draw_phase_diagram, "jamming_fits_3d.json", "figure", jamming_points.DPI
+    ),
+    "figures/collapse_2d_3d.png": Figure(collapse.draw, "collapse_2d_3d.json", "figure", collapse.DPI),
     "figures/imaging_noise.png": Figure(draw_imaging_noise, "figures/imaging_noise.json", "figure", 110),
     "figures/scheme_near_jamming.png": Figure(
         draw_scheme_near_jamming, "scheme_near_jamming.json", "figure", 120

@@ -216,7 +216,7 @@ def draw(data: dict):
     stresses = [s["stress"] for side in ("two", "three") for s in data[side]["states"]]
     norm = LogNorm(min(stresses), max(stresses))
     cmap = plt.get_cmap("viridis")
-    fig, axes = plt.subplots(1, 3, figsize=(12.5, 3.8))
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.0), constrained_layout=True)
     for side, marker, style in (("two", "o", "-"), ("three", "^", "--")):
         states = data[side]["states"]
         for stress in sorted({s["stress"] for s in states}):

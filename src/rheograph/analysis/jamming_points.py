@@ -537,8 +537,10 @@ def draw_phase_diagram(data: dict):
         ax.set_title(f"N = {size_label(size['n'], size.get('dim', 2))}")
     axes[0][0].set_ylabel(r"$\sigma/\sigma_0$")
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    # one panel is too narrow for four legend columns: two, and room below for their rows
+    columns = 4 if len(sizes) > 1 else 2
+    fig.legend(handles, labels, loc="lower center", ncol=columns, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.08 if len(sizes) > 1 else 0.2, 1, 1))
     return fig
 
 
