@@ -100,7 +100,9 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, default=0.0, help="Gaussian position noise per coordinate [a]")
     ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
     ap.add_argument(
-        "--section", default="lfdem_snapshots", help="the marked section (default: docs/validation/position_noise.md's)"
+        "--section",
+        default="lfdem_snapshots",
+        help="the marked section (default: docs/validation/position_noise.md's)",
     )
     ap.add_argument(
         "--page",
