@@ -358,6 +358,20 @@ def main(argv=None) -> int:
     ap.add_argument("--lfdem-data", type=Path, help="LF_DEM data_ file (default: from --reference)")
     ap.add_argument("--par", type=Path, help="LF_DEM par_ file with the strain-0 snapshot")
     ap.add_argument("--json", type=Path, help="write the numbers here")
+    ap.add_argument(
+        "--ours",
+        type=Path,
+        help="our series from an earlier --json of the same settings: compared again, not rerun",
+    )
+    ap.add_argument(
+        "--campaign",
+        nargs="+",
+        default=[],
+        help="trajectory files of the same state point run by simulate.py (own start and scheme): "
+        "their steady values (mean over the files) in a column of their own",
+    )
+    ap.add_argument("--section", help="publish the steady comparison as this section of --page")
+    ap.add_argument("--page", default="validation/lfdem_3d.md")
     ap.add_argument("--progress", action="store_true")
     args = ap.parse_args(argv)
 
@@ -402,10 +416,14 @@ def main(argv=None) -> int:
     for p in problems:
         print("  DISAGREES:", p)
 
-    if args.strain > 0:
+    if args.ours is not None:
+        series, cost = earlier_series(args.ours, args)
+    elif args.strain > 0:
         # a fresh simulation from the same start: the check's step has already moved the first one
         sim = make_simulation(conf, args)
         series, cost = run_ours(sim, args, n)
+    if args.ours is not None or args.strain > 0:
+        report["settings"] = settings(args)
         report["cost_ours"] = cost
         report["series_ours"] = {k: v.tolist() for k, v in series.items()}
         if "cpu_per_strain" in cost:
@@ -438,9 +456,108 @@ def main(argv=None) -> int:
                 f"diff {y - x:+.3g} = {(y - x) / comb if comb > 0 else float('nan'):+.1f} combined SE, "
                 f"{100 * (y - x) / x:+.1f} %"
             )
+        if args.section:
+            campaign = campaign_steady(args.campaign, args.stress) if args.campaign else None
+            publish_steady(args, report, a, b, campaign, argv)
     if args.json:
         args.json.write_text(json.dumps(report, indent=1, default=float) + "\n")
     return 1 if problems else 0
+
+
+SETTINGS = ("stress", "control", "rate", "disp_max")
+
+
+def settings(args) -> dict:
+    """The options an earlier run of ours must share to be compared again (``--ours``)."""
+    return {key: getattr(args, key) for key in SETTINGS}
+
+
+def earlier_series(path: Path, args) -> tuple[dict, dict]:
+    """Our series and cost kept by an earlier ``--json`` of the same settings."""
+    try:
+        report = json.loads(Path(path).read_text())
+        kept, series, cost = report["settings"], report["series_ours"], report["cost_ours"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(
+            f"--ours {path}: not the --json of an earlier run of ours with a strain > 0 ({exc})"
+        ) from None
+    if kept != settings(args):
+        raise SystemExit(f"--ours {path}: made with {kept}, not the settings asked for, {settings(args)}")
+    return {key: np.asarray(values, dtype=np.float64) for key, values in series.items()}, cost
+
+
+STEADY_ROWS = (("viscosity", "η_r"), ("pressure_over_sigma", "Π/σ"), ("z", "Z"), ("z_mu", "Z_μ"))
+
+
+def campaign_steady(paths, stress: float) -> dict:
+    """Steady values of simulate.py's runs of the state point (their summaries, strain >= the run's
+    steady_state_strain): the mean over the files, standard errors combined as for independent runs."""
+    from rheograph.io.hdf5 import read_run_info
+
+    infos = [read_run_info(path) for path in paths]
+    out = {"runs": len(infos), "window": float(infos[0]["params"]["steady_state_strain"])}
+    sources = (("viscosity", "viscosity"), ("pressure_over_sigma", "pressure"), ("z", "z"), ("z_mu", "z_mu"))
+    for key, source in sources:
+        scale = stress if key == "pressure_over_sigma" else 1.0
+        values = np.array([info["summary"][source] for info in infos]) / scale
+        errors = np.array([info["summary"][source + "_se"] for info in infos]) / scale
+        out[key] = float(values.mean())
+        out[key + "_se"] = float(np.sqrt((errors**2).sum()) / len(infos))
+    return out
+
+
+def publish_steady(args, report: dict, lfdem: dict, ours: dict, campaign: dict | None, argv) -> None:
+    """The steady comparison as a published section: LF_DEM, ours from the same start and scheme, their
+    difference (per cent and in combined standard errors), and simulate.py's runs where given."""
+    from bench.publishing import Section, command_line, publish
+
+    w0, w1 = report["steady"]["window"]
+    what = f"σ/σ0 = {args.stress:g}" if args.control == "stress" else f"γ̇/γ̇0 = {args.rate:g}"
+    header = [
+        "quantity",
+        f"LF_DEM (Euler, {args.disp_max:g})",
+        "rheograph, same start and scheme",
+        "difference",
+    ]
+    if campaign:
+        header.append(
+            f"rheograph, implicit, own start ({campaign['runs']} runs, strain ≥ {campaign['window']:g})"
+        )
+    rows = []
+    for key, label in STEADY_ROWS:
+        x, ex, y, ey = lfdem[key], lfdem[key + "_se"], ours[key], ours[key + "_se"]
+        row = [
+            label,
+            f"{x:.4g} ± {ex:.2g}",
+            f"{y:.4g} ± {ey:.2g}",
+            f"{100 * (y - x) / x:+.1f} % ({(y - x) / np.hypot(ex, ey):+.1f} SE)",
+        ]
+        if campaign:
+            row.append(f"{campaign[key]:.4g} ± {campaign[key + '_se']:.2g}")
+        rows.append(row)
+    cost = report["cost_ours"]
+    out = Section(
+        f"**The steady state, {what}**, strain {w0:g}–{w1:.2f}, the same estimator on both sides "
+        "(`rheograph.analysis.steady.steady_state_summary`, 5 block standard errors), one run a side "
+        "from LF_DEM's start:",
+        "",
+    )
+    out.table(header, rows)
+    if "cpu_per_strain" in cost:
+        out.add(
+            "",
+            f"rheograph's run: {cost['cpu_per_strain']:.0f} CPU s per strain, "
+            f"{cost['steps_per_strain']:.0f} steps per strain, {cost['ms_per_step']:.1f} ms per step "
+            f"(strain {cost['window'][0]:.2f}–{cost['window'][1]:.2f}, one core).",
+        )
+    publish(
+        args.section,
+        out,
+        True,
+        page=args.page,
+        record={"steady": report["steady"], "campaign": campaign, "cost_ours": cost},
+        command=command_line("vs_lfdem_3d", argv),
+    )
 
 
 def strain_zero_check_rate_only(sim: Simulation3D, lf: dict) -> tuple[dict, list[str]]:

@@ -58,3 +58,20 @@ def test_steady_state_agrees_with_lfdem_3d_below_the_friction_onset(tmp_path):
     assert within_combined_se("z_mu")
     for key in ("pressure_over_sigma", "z"):
         assert abs(ours[key] - lf[key]) <= 0.1 * abs(lf[key]), key
+
+
+def test_an_earlier_run_of_ours_is_compared_again_not_rerun(tmp_path):
+    """``--ours`` reads our series back from an earlier ``--json`` and gives the same steady numbers
+    without a step; a file made with other settings is refused in one line naming both."""
+    bench = load_bench()
+    first, again = tmp_path / "first.json", tmp_path / "again.json"
+    argv = ["--stress", "0.5", "--strain", "0.12", "--steady", "0", "--warmup-strain", "0.01"]
+    assert bench.main(argv + ["--json", str(first)]) == 0
+    assert bench.main(argv + ["--ours", str(first), "--json", str(again)]) == 0
+    kept, reread = json.loads(first.read_text()), json.loads(again.read_text())
+    assert kept["steady"]["ours"]["n_rows"] >= 10
+    assert reread["steady"] == kept["steady"] and reread["series_ours"] == kept["series_ours"]
+    with pytest.raises(SystemExit, match="not the settings asked for"):
+        bench.main(["--stress", "10", "--strain", "0.12", "--ours", str(first)])
+    with pytest.raises(SystemExit, match="not the --json of an earlier run"):
+        bench.main(["--stress", "0.5", "--ours", str(tmp_path / "missing.json")])
