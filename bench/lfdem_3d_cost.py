@@ -101,7 +101,7 @@ def our_row(path: Path, stress: float, steady_from: float) -> dict:
     }
 
 
-def section(stress: float, rows: list[dict]) -> Section:
+def section(stress: float, rows: list[dict], command: str) -> Section:
     out = Section(
         f"**Cost and accuracy at σ/σ0 = {stress:g}**, every run from LF_DEM's start (N = 500, φ = 0.56), "
         "one run each, steady means with 5 block standard errors; CPU seconds per strain on one core "
@@ -125,6 +125,7 @@ def section(stress: float, rows: list[dict]) -> Section:
             + [f"{s[key]:.4g} ± {s[key + '_se']:.2g}" for key, _ in QUANTITIES]
         )
     out.table(header, cells)
+    out.add("", f"Command: `{command}`")
     return out
 
 
@@ -156,13 +157,14 @@ def main(argv=None) -> int:
     if not rows:
         sys.exit("lfdem_3d_cost: no runs (--lfdem and/or --ours)")
     section_name = args.section or f"lfdem_3d_cost_{args.stress:g}".replace(".", "")
+    command = command_line("lfdem_3d_cost", argv)
     publish(
         section_name,
-        section(args.stress, rows),
+        section(args.stress, rows, command),
         not args.no_write,
         page=args.page,
         record={"rows": rows},
-        command=command_line("lfdem_3d_cost", argv),
+        command=command,
     )
     return 0
 

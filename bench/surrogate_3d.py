@@ -69,7 +69,7 @@ def cell(folds: list[dict], key: str) -> str:
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
 
-def section(runs: list[dict]) -> Section:
+def section(runs: list[dict], command: str) -> Section:
     out = Section(
         "The shipped 3D models, one per volume fraction: N = 500 spheres, the runs of the 3D flow-curve "
         "set at that φ (σ/σ0 = 0.5–200, two seeds each, strain 3, `campaign=flow_curves_3d`, committed in "
@@ -94,6 +94,7 @@ def section(runs: list[dict]) -> Section:
         for prefix, name in PREDICTORS:
             rows.append([label, name] + [cell(run["folds"], f"{prefix}/{key}") for key, _ in METRICS])
     out.table(["φ (model N500_phi<φ>_3d)", "predictor"] + [label for _, label in METRICS], rows)
+    out.add("", f"Command: `{command}`")
     return out
 
 
@@ -121,13 +122,14 @@ def main(argv=None) -> int:
             for run in runs
         ]
     }
+    command = command_line("surrogate_3d", argv)
     publish(
         args.section,
-        section(runs),
+        section(runs, command),
         not args.no_write,
         page=args.page,
         record=record,
-        command=command_line("surrogate_3d", argv),
+        command=command,
     )
     return 0
 

@@ -565,13 +565,15 @@ def publish_steady(args, report: dict, lfdem: dict, ours: dict, campaign: dict |
             f"{cost['steps_per_strain']:.0f} steps per strain, {cost['ms_per_step']:.1f} ms per step "
             f"(strain {cost['window'][0]:.2f}–{cost['window'][1]:.2f}, one core).",
         )
+    command = command_line("vs_lfdem_3d", argv)
+    out.add("", f"Command: `{command}`")
     publish(
         args.section,
         out,
         True,
         page=args.page,
         record={"steady": report["steady"], "campaign": campaign, "cost_ours": cost},
-        command=command_line("vs_lfdem_3d", argv),
+        command=command,
     )
 
 

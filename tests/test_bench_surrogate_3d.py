@@ -18,7 +18,7 @@ def test_rows_come_from_the_folds_metrics():
     folds = json.loads((RUN / "metrics.json").read_text())["folds"]
     values = [f["test/r2_log_eta"] for f in folds]
     assert bench.cell(folds, "test/r2_log_eta") == f"{np.mean(values):.3f} ± {np.std(values, ddof=1):.3f}"
-    blocks = bench.section([run]).blocks()
+    blocks = bench.section([run], "python -m bench.surrogate_3d RUN").blocks()
     (table,) = [b["table"] for b in blocks if "table" in b]
     network = [row for row in table["rows"] if row[1] == "graph network"]
     assert network == [
