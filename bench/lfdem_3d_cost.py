@@ -132,7 +132,7 @@ def section(stress: float, rows: list[dict], command: str) -> Section:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reference", type=Path, default=REFERENCE)
-    ap.add_argument("--stress", type=float, required=True, help="σ/σ0 of the runs")
+    ap.add_argument("--stress", type=float, help="σ/σ0 of the runs (required unless --log)")
     ap.add_argument("--lfdem", nargs="*", default=[], help="LF_DEM runs <tag> (data_<tag>.dat)")
     ap.add_argument("--ours", nargs="*", type=Path, default=[], help="bench.vs_lfdem_3d --json reports")
     ap.add_argument("--steady", type=float, default=1.0, help="steady window starts at this strain")
@@ -152,6 +152,8 @@ def main(argv=None) -> int:
         cpu_path.write_text(json.dumps(cpu, indent=1, sort_keys=True) + "\n")
         print(f"{cpu_path}: {args.tag} {cpu[args.tag]}")
         return 0
+    if args.stress is None:
+        sys.exit("lfdem_3d_cost: --stress is required (the σ/σ0 of the runs)")
     rows = [lfdem_row(args.reference, run, args.stress, args.steady, cpu) for run in args.lfdem]
     rows += [our_row(path, args.stress, args.steady) for path in args.ours]
     if not rows:
