@@ -67,7 +67,10 @@ def lfdem_row(reference: Path, run: str, stress: float, steady_from: float, cpu:
     data_path = reference / f"data_{run}.dat"
     if not data_path.is_file():
         raise SystemExit(f"--lfdem {run}: {data_path} not found (gunzip a .gz first)")
-    series = lfdem_series(data_path, data_path.with_name(f"st_{run}.dat"), stress, "stress")
+    st_path = data_path.with_name(f"st_{run}.dat")
+    if not st_path.is_file():
+        raise SystemExit(f"--lfdem {run}: {st_path} not found (LF_DEM's st_ file of the run, gunzipped)")
+    series = lfdem_series(data_path, st_path, stress, "stress")
     end = float(series["strain"][-1])
     disp = run.split("_disp", 1)[1] if "_disp" in run else "?"
     entry = cpu.get(run)

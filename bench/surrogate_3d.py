@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.publishing import Section, command_line, publish
+from bench.surrogate_per_phi import stats
 
 # (metric key, column) of the three targets, and (key prefix of the folds' metrics, row name)
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
@@ -63,8 +64,7 @@ def read_run(folder: Path) -> dict:
 
 def cell(folds: list[dict], key: str) -> str:
     """Mean ± standard deviation (ddof 1) of ``key`` over the folds."""
-    values = np.array([fold[key] for fold in folds], dtype=np.float64)
-    mean, std = float(np.mean(values)), float(np.std(values, ddof=1))
+    mean, std = stats(folds, key)
     digits = 3 if "eta" in key else 4
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
