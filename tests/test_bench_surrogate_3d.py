@@ -33,3 +33,30 @@ def test_a_folder_that_is_not_a_finished_run_is_refused(tmp_path):
         bench.read_run(tmp_path)
     with pytest.raises(SystemExit, match="no metrics.json"):
         bench.read_run(tmp_path / "N500_phi0.5")
+
+
+POOLED = ROOT / "docs" / "results" / "surrogate_3d" / "pooled_N500"
+
+
+def test_the_pooled_table_scores_each_phi_on_its_own_test_snapshots():
+    """Per φ, each fold's R² log η_r is that of its test snapshots at that φ alone (recomputed here from
+    the saved predictions: 1 − SS_res / SS_tot of log10 η_r), and the runs are counted per φ."""
+    bench = load_bench_script("surrogate_3d")
+    pooled = bench.read_pooled(POOLED)
+    counts = {phi: e["trajectories"] for phi, e in pooled["per_phi"].items()}
+    assert counts == {0.5: 16, 0.53: 1, 0.55: 1, 0.56: 16}
+    for k in range(5):
+        with np.load(POOLED / f"fold{k}_predictions.npz") as saved:
+            at = np.isclose(saved["phi"], 0.56)
+            pred, true = np.log10(saved["pred"][at, 0]), np.log10(saved["true"][at, 0])
+        expected = 1.0 - np.sum((pred - true) ** 2) / np.sum((true - true.mean()) ** 2)
+        assert pooled["per_phi"][0.56]["test"]["r2_log_eta"][k] == pytest.approx(expected, rel=1e-9)
+    single = pooled["per_phi"][0.53]["test"]["r2_log_eta"]
+    assert np.isfinite(single).sum() == 1
+    assert bench.pooled_cell(single, "r2_log_eta").endswith("(one fold)")
+
+
+def test_a_pooled_folder_must_be_named_so():
+    bench = load_bench_script("surrogate_3d")
+    with pytest.raises(SystemExit, match="must be named pooled_N<N>"):
+        bench.read_pooled(RUN)

@@ -524,13 +524,19 @@ def load_finished_fold(run_dir: Path, k: int):
     done = run_dir / f"fold{k}_result.json"
     if not (done.exists() and (run_dir / f"fold{k}.pt").exists()):
         return None
-    with np.load(run_dir / f"fold{k}_predictions.npz") as data:
+    return json.loads(done.read_text()), read_fold_predictions(run_dir, k)
+
+
+def read_fold_predictions(run_dir: Path, k: int) -> dict:
+    """Fold k's test predictions as ``save_finished_fold`` wrote them: ``pred``, ``true`` (G, 3),
+    ``stress``, ``phi``, ``run_id``, ``jammed`` (G,), ``fold`` and ``baselines`` {name: (G, 3)}."""
+    with np.load(Path(run_dir) / f"fold{k}_predictions.npz") as data:
         arrays = {key: data[key] for key in data.files}
     baselines = {
         key[len("baseline_") :]: arrays.pop(key) for key in list(arrays) if key.startswith("baseline_")
     }
     arrays["fold"] = int(arrays["fold"])
-    return json.loads(done.read_text()), {**arrays, "baselines": baselines}
+    return {**arrays, "baselines": baselines}
 
 
 def _stack_predictions(predictions) -> dict:
