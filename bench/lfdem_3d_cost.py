@@ -26,7 +26,15 @@ from pathlib import Path
 import numpy as np
 
 from bench.publishing import Section, command_line, publish
-from bench.vs_lfdem_3d import REFERENCE, earlier_series, lfdem_series, read_table, steady
+from bench.vs_lfdem_3d import (
+    CONF,
+    REFERENCE,
+    earlier_series,
+    lfdem_series,
+    read_configuration,
+    read_table,
+    steady,
+)
 
 CPU_FILE = "lfdem_cpu.json"
 QUANTITIES = (("viscosity", "η_r"), ("pressure_over_sigma", "Π/σ"), ("z_mu", "Z_μ"))
@@ -104,10 +112,13 @@ def our_row(path: Path, stress: float, steady_from: float) -> dict:
     }
 
 
-def section(stress: float, rows: list[dict], command: str) -> Section:
+def section(stress: float, start: dict, steady_from: float, rows: list[dict], command: str) -> Section:
+    n = start["radii"].shape[0]
+    means = "steady means" if steady_from >= 1.0 else f"means over strain ≥ {steady_from:g} (not yet steady)"
     out = Section(
-        f"**Cost and accuracy at σ/σ0 = {stress:g}**, every run from LF_DEM's start (N = 500, φ = 0.56), "
-        "one run each, steady means with 5 block standard errors; CPU seconds per strain on one core "
+        f"**Cost and accuracy at σ/σ0 = {stress:g}**, every run from LF_DEM's start (N = {n}, "
+        f"φ = {start['vf']:g}), one run each, {means} with 5 block standard errors; CPU seconds per strain "
+        "on one core "
         "(LF_DEM: its process's user + system time against the strain it wrote; ours: the process's CPU "
         "time over the steps after strain 0.05):",
         "",
@@ -135,6 +146,7 @@ def section(stress: float, rows: list[dict], command: str) -> Section:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reference", type=Path, default=REFERENCE)
+    ap.add_argument("--configuration", default=CONF, help="LF_DEM's start in --reference")
     ap.add_argument("--stress", type=float, help="σ/σ0 of the runs (required unless --log)")
     ap.add_argument("--lfdem", nargs="*", default=[], help="LF_DEM runs <tag> (data_<tag>.dat)")
     ap.add_argument("--ours", nargs="*", type=Path, default=[], help="bench.vs_lfdem_3d --json reports")
@@ -157,6 +169,10 @@ def main(argv=None) -> int:
         return 0
     if args.stress is None:
         sys.exit("lfdem_3d_cost: --stress is required (the σ/σ0 of the runs)")
+    start_path = args.reference / args.configuration
+    if not start_path.is_file():
+        sys.exit(f"--configuration {start_path}: not found (LF_DEM's generator output in --reference)")
+    start = read_configuration(start_path)
     rows = [lfdem_row(args.reference, run, args.stress, args.steady, cpu) for run in args.lfdem]
     rows += [our_row(path, args.stress, args.steady) for path in args.ours]
     if not rows:
@@ -165,7 +181,7 @@ def main(argv=None) -> int:
     command = command_line("lfdem_3d_cost", argv)
     publish(
         section_name,
-        section(args.stress, rows, command),
+        section(args.stress, start, args.steady, rows, command),
         not args.no_write,
         page=args.page,
         record={"rows": rows},

@@ -348,6 +348,11 @@ def run_ours(sim: Simulation3D, args, n: int) -> tuple[dict, dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reference", type=Path, default=REFERENCE, help="folder with LF_DEM's files")
+    ap.add_argument(
+        "--configuration",
+        default=CONF,
+        help="LF_DEM's start in --reference (its generator's file name)",
+    )
     ap.add_argument("--stress", type=float, default=10.0, help="sigma/sigma0 (rate control: stiffness scale)")
     ap.add_argument("--control", choices=("stress", "rate"), default="stress")
     ap.add_argument("--rate", type=float, default=0.1, help="imposed rate under --control rate")
@@ -394,7 +399,10 @@ def main(argv=None) -> int:
     for path in (data_path, st_path):
         if not path.exists() and path.with_suffix(path.suffix + ".gz").exists():
             raise SystemExit(f"{path}.gz: gunzip it first (gunzip -k {path}.gz)")
-    conf = read_configuration(args.reference / CONF)
+    conf_path = args.reference / args.configuration
+    if not conf_path.is_file():
+        raise SystemExit(f"--configuration {conf_path}: not found (LF_DEM's generator output in --reference)")
+    conf = read_configuration(conf_path)
     n = conf["radii"].shape[0]
     lf = lfdem_series(data_path, st_path, args.stress, args.control)
     report: dict = dict(
@@ -481,8 +489,12 @@ SETTINGS = ("stress", "control", "rate", "disp_max", "scheme")
 
 
 def settings(args) -> dict:
-    """The options an earlier run of ours must share to be compared again (``--ours``)."""
-    return {key: getattr(args, key) for key in SETTINGS}
+    """The options an earlier run of ours must share to be compared again (``--ours``), with the start
+    it ran from (reports written before ``--configuration`` existed ran from ``CONF``)."""
+    return {
+        **{key: getattr(args, key) for key in SETTINGS},
+        "configuration": getattr(args, "configuration", CONF),
+    }
 
 
 def earlier_series(path: Path, args) -> tuple[dict, dict]:
@@ -494,6 +506,7 @@ def earlier_series(path: Path, args) -> tuple[dict, dict]:
         raise SystemExit(
             f"--ours {path}: not the --json of an earlier run of ours with a strain > 0 ({exc})"
         ) from None
+    kept = {"configuration": CONF, **kept}
     if kept != settings(args):
         raise SystemExit(f"--ours {path}: made with {kept}, not the settings asked for, {settings(args)}")
     return {key: np.asarray(values, dtype=np.float64) for key, values in series.items()}, cost

@@ -36,3 +36,20 @@ def test_a_report_at_another_stress_is_refused(tmp_path):
     report.write_text(json.dumps({"settings": settings, "series_ours": {}, "cost_ours": {}}))
     with pytest.raises(SystemExit, match="not stress control at σ/σ0 = 200"):
         bench.our_row(report, 200.0, 1.0)
+
+
+def test_the_table_names_the_start_it_was_run_from():
+    """The N = 2000 reference run (LF_DEM's start of that size, stopped at strain 0.25): the section
+    states N and φ read from the start file and that its means are not steady ones; its steps per strain
+    come from LF_DEM's own dt column."""
+    bench = load_bench_script("lfdem_3d_cost")
+    reference = bench.REFERENCE.parent / "phi0.56_n2000"
+    start = bench.read_configuration(reference / "D3N2000VF0.56Bidi1.4_0.5Cubic_1_.dat")
+    cpu = json.loads((reference / "lfdem_cpu.json").read_text())
+    row = bench.lfdem_row(reference, "s10_disp1e-3", 10.0, 0.05, cpu)
+    assert row["window"] == (0.05, 0.25) and row["cpu_per_strain"] == cpu["s10_disp1e-3"]["cpu_per_strain"]
+    assert 1_000 < row["steps_per_strain"] < 100_000
+    text = "".join(b.get("text", "") for b in bench.section(10.0, start, 0.05, [row], "cmd").blocks())
+    assert "(N = 2000, φ = 0.56)" in text and "not yet steady" in text
+    with pytest.raises(SystemExit, match="--configuration .*: not found"):
+        bench.main(["--stress", "10", "--configuration", "missing.dat", "--no-write"])

@@ -61,7 +61,8 @@ def test_the_phi_050_model_reads_its_own_trajectory_and_flags_the_other_phi(mode
     capsys.readouterr()
     other = model.predict_snapshots(snaps)
     assert not other["in_domain"].any()
-    assert "phi = 0.5 outside the trained [0.56, 0.56] (use N500_phi0.50_3d or pooled_N500_3d)" in capsys.readouterr().err
+    expected = "phi = 0.5 outside the trained [0.56, 0.56] (use N500_phi0.50_3d or pooled_N500_3d)"
+    assert expected in capsys.readouterr().err
 
 
 def test_the_pooled_model_reads_a_phi_between_the_full_sets_and_flags_one_beyond(capsys):

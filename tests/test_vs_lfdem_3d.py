@@ -62,7 +62,8 @@ def test_steady_state_agrees_with_lfdem_3d_below_the_friction_onset(tmp_path):
 
 def test_an_earlier_run_of_ours_is_compared_again_not_rerun(tmp_path):
     """``--ours`` reads our series back from an earlier ``--json`` and gives the same steady numbers
-    without a step; a file made with other settings is refused in one line naming both."""
+    without a step; a file made with other settings or from another start is refused in one line naming
+    both, and so is a start that is not in the reference folder."""
     bench = load_bench()
     first, again = tmp_path / "first.json", tmp_path / "again.json"
     argv = ["--stress", "0.5", "--strain", "0.12", "--steady", "0", "--warmup-strain", "0.01"]
@@ -75,3 +76,11 @@ def test_an_earlier_run_of_ours_is_compared_again_not_rerun(tmp_path):
         bench.main(["--stress", "10", "--strain", "0.12", "--ours", str(first)])
     with pytest.raises(SystemExit, match="not the --json of an earlier run"):
         bench.main(["--stress", "0.5", "--ours", str(tmp_path / "missing.json")])
+    # a run from another start (LF_DEM's N = 2000 configuration) is not compared with this one's
+    other = tmp_path / "other_start.json"
+    kept["settings"]["configuration"] = "D3N2000VF0.56Bidi1.4_0.5Cubic_1_.dat"
+    other.write_text(json.dumps(kept))
+    with pytest.raises(SystemExit, match="D3N2000VF0.56Bidi1.4_0.5Cubic_1_.dat"):
+        bench.main(argv + ["--ours", str(other)])
+    with pytest.raises(SystemExit, match="--configuration .*missing.dat: not found"):
+        bench.main(argv + ["--configuration", "missing.dat"])
