@@ -6,6 +6,9 @@
     python -m bench.vs_lfdem_3d --strain 2 --stress 10
     # the rate-controlled point (LF_DEM -r 0.1cl with the stiffness of sigma/sigma0 = 10)
     python -m bench.vs_lfdem_3d --strain 2 --control rate --rate 0.1 --stress 10
+    # from LF_DEM's N = 2000 start (its reference run stops at strain 0.25: a cost window, not a steady one)
+    python -m bench.vs_lfdem_3d --reference data/lfdem_reference_3d/phi0.56_n2000 \
+        --configuration D3N2000VF0.56Bidi1.4_0.5Cubic_1_.dat --strain 0.25 --steady 0.05 --stress 10
 
 Reads LF_DEM's 3D start (data/lfdem_reference_3d/phi0.56_n500/D3N500VF0.56Bidi1.4_0.5Cubic_1_.dat, made
 by LF_DEM's own generator) and the LF_DEM outputs of the same state point (its README lists them), and runs
