@@ -49,15 +49,21 @@ RUN_NAME = re.compile(r"^N(\d+)_phi(\d+(?:\.\d+)?)$")
 POOLED_NAME = re.compile(r"^pooled_N(\d+)$")
 
 
-def read_run(folder: Path) -> dict:
-    """N, φ, the folds' metrics and the counts of test trajectories and snapshots of one result folder."""
-    match = RUN_NAME.match(folder.name)
+def finished_run(folder: Path, name: re.Pattern, example: str) -> tuple[re.Match, list[dict]]:
+    """The match of a result folder's name against ``name`` and its folds' metrics, or one line that says
+    why the folder is not a finished training run's named as it must be (e.g. ``example``)."""
+    match = name.match(folder.name)
     if match is None:
-        sys.exit(f"surrogate_3d: {folder}: the folder must be named N<N>_phi<φ> (e.g. N500_phi0.56)")
+        sys.exit(f"surrogate_3d: {folder}: the folder must be named {example}")
     metrics = folder / "metrics.json"
     if not metrics.is_file():
         sys.exit(f"surrogate_3d: {folder} has no metrics.json: not a finished training run's result folder")
-    folds = json.loads(metrics.read_text())["folds"]
+    return match, json.loads(metrics.read_text())["folds"]
+
+
+def read_run(folder: Path) -> dict:
+    """N, φ, the folds' metrics and the counts of test trajectories and snapshots of one result folder."""
+    match, folds = finished_run(folder, RUN_NAME, "N<N>_phi<φ> (e.g. N500_phi0.56)")
     snapshots = 0
     for fold in folds:
         with np.load(folder / f"fold{fold['fold']}_predictions.npz") as predictions:
@@ -109,13 +115,7 @@ def section(runs: list[dict], command: str) -> Section:
 
 def read_pooled(folder: Path) -> dict:
     """N, the folds' metrics and, per φ, each predictor's fold scores of a pooled run's result folder."""
-    match = POOLED_NAME.match(folder.name)
-    if match is None:
-        sys.exit(f"surrogate_3d: --pooled {folder}: the folder must be named pooled_N<N> (e.g. pooled_N500)")
-    metrics = folder / "metrics.json"
-    if not metrics.is_file():
-        sys.exit(f"surrogate_3d: {folder} has no metrics.json: not a finished training run's result folder")
-    folds = json.loads(metrics.read_text())["folds"]
+    match, folds = finished_run(folder, POOLED_NAME, "pooled_N<N> (e.g. pooled_N500)")
     predictions = [read_fold_predictions(folder, fold["fold"]) for fold in folds]
     n = int(match.group(1))
     per_phi: dict[float, dict] = {}

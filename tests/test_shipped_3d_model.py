@@ -27,21 +27,30 @@ def model():
     return rheograph.load_model(MODEL)
 
 
+def steady_snapshots(path):
+    snaps = read_snapshots(path)
+    return snaps.select(snaps.strain >= 1.0)
+
+
+def assert_close_to_the_simulator(table, n_snapshots, eta_factor, pressure_mean, pressure_max):
+    """Every snapshot predicted and in domain; η_r within ``eta_factor`` in the mean of |log10 ratio|, Π
+    within ``pressure_mean`` (relative) in the mean and ``pressure_max`` at worst, Z_μ within 0.02."""
+    assert len(table["eta_pred"]) == n_snapshots >= 15
+    assert np.mean(np.abs(np.log10(table["eta_pred"] / table["eta_sim"]))) < np.log10(eta_factor)
+    pressure_error = np.abs(table["pressure_pred"] / table["pressure_sim"] - 1.0)
+    assert pressure_error.mean() < pressure_mean and pressure_error.max() < pressure_max
+    assert np.max(np.abs(table["z_mu_pred"] - table["z_mu_sim"])) < 0.02
+    assert table["in_domain"].all()
+
+
 def test_the_3d_model_reads_a_3d_trajectory_close_to_the_simulator(model):
     """Steady snapshots (strain >= 1) of one committed run (each trajectory is held out by one fold
     model): the ensemble's η_r within 12 % of the simulator's in the mean of |log10 ratio| (measured
     0.028 decades, 7 %), Π within 1 % in the mean and 2.5 % at worst (measured 0.5 % and 1.2 %; R² log Π
     0.99996) and Z_μ within 0.02 of the simulator's (measured 0.004 at worst: learned on the count),
     every snapshot in domain."""
-    snaps = read_snapshots(RUN_3D)
-    snaps = snaps.select(snaps.strain >= 1.0)
-    table = model.predict_snapshots(snaps)
-    assert len(table["eta_pred"]) == len(snaps) >= 15
-    assert np.mean(np.abs(np.log10(table["eta_pred"] / table["eta_sim"]))) < np.log10(1.12)
-    pressure_error = np.abs(table["pressure_pred"] / table["pressure_sim"] - 1.0)
-    assert pressure_error.mean() < 0.01 and pressure_error.max() < 0.025
-    assert np.max(np.abs(table["z_mu_pred"] - table["z_mu_sim"])) < 0.02
-    assert table["in_domain"].all()
+    snaps = steady_snapshots(RUN_3D)
+    assert_close_to_the_simulator(model.predict_snapshots(snaps), len(snaps), 1.12, 0.01, 0.025)
 
 
 def test_the_phi_050_model_reads_its_own_trajectory_and_flags_the_other_phi(model, capsys):
@@ -49,15 +58,9 @@ def test_the_phi_050_model_reads_its_own_trajectory_and_flags_the_other_phi(mode
     |log10 ratio| (measured 0.014 decades, 3 %), Π within 2.5 % in the mean and 5 % at worst (measured 1.3 %
     and 2.8 %), Z_μ within 0.02, every snapshot in domain.  The φ = 0.56 model on the same snapshots
     flags every one as outside its domain and names the model that covers it."""
-    snaps = read_snapshots(RUN_3D_050)
-    snaps = snaps.select(snaps.strain >= 1.0)
+    snaps = steady_snapshots(RUN_3D_050)
     table = rheograph.load_model("N500_phi0.50_3d").predict_snapshots(snaps)
-    assert len(table["eta_pred"]) == len(snaps) >= 15
-    assert np.mean(np.abs(np.log10(table["eta_pred"] / table["eta_sim"]))) < np.log10(1.08)
-    pressure_error = np.abs(table["pressure_pred"] / table["pressure_sim"] - 1.0)
-    assert pressure_error.mean() < 0.025 and pressure_error.max() < 0.05
-    assert np.max(np.abs(table["z_mu_pred"] - table["z_mu_sim"])) < 0.02
-    assert table["in_domain"].all()
+    assert_close_to_the_simulator(table, len(snaps), 1.08, 0.025, 0.05)
     capsys.readouterr()
     other = model.predict_snapshots(snaps)
     assert not other["in_domain"].any()
@@ -73,18 +76,10 @@ def test_the_pooled_model_reads_a_phi_between_the_full_sets_and_flags_one_beyond
     beyond the trained range and is flagged (there the prediction is 25 % off the simulator's: measured
     0.096 decades)."""
     pooled = rheograph.load_model("pooled_N500_3d")
-    snaps = read_snapshots(RUN_3D_053)
-    snaps = snaps.select(snaps.strain >= 1.0)
-    table = pooled.predict_snapshots(snaps)
-    assert len(table["eta_pred"]) == len(snaps) >= 15
-    assert np.mean(np.abs(np.log10(table["eta_pred"] / table["eta_sim"]))) < np.log10(1.12)
-    pressure_error = np.abs(table["pressure_pred"] / table["pressure_sim"] - 1.0)
-    assert pressure_error.mean() < 0.02 and pressure_error.max() < 0.04
-    assert np.max(np.abs(table["z_mu_pred"] - table["z_mu_sim"])) < 0.02
-    assert table["in_domain"].all()
+    snaps = steady_snapshots(RUN_3D_053)
+    assert_close_to_the_simulator(pooled.predict_snapshots(snaps), len(snaps), 1.12, 0.02, 0.04)
     capsys.readouterr()
-    beyond = read_snapshots(RUN_3D_058)
-    assert not pooled.predict_snapshots(beyond.select(beyond.strain >= 1.0))["in_domain"].any()
+    assert not pooled.predict_snapshots(steady_snapshots(RUN_3D_058))["in_domain"].any()
     assert "phi = 0.58 outside the trained [0.5, 0.56]" in capsys.readouterr().err
 
 
