@@ -17,6 +17,7 @@ import torch
 from torch_geometric.data import Data, InMemoryDataset
 
 from rheograph.errors import InputError
+from rheograph.graphs.batched_solve import DenseBatchSolver
 from rheograph.graphs.features import (
     COMPUTED_GRAPH_INPUTS,
     EDGE_FEATURES,
@@ -30,10 +31,13 @@ from rheograph.graphs.features import (
     check_separations,
     forward_transform,
     node_features,
+    one_solve_viscosity,
     relax_positions,
+    relax_simulations,
     shell_inputs,
     snapshot_descriptors,
     snapshot_edges,
+    snapshot_simulation,
     solve_viscosity,
 )
 from rheograph.graphs.features3d import (
@@ -41,13 +45,16 @@ from rheograph.graphs.features3d import (
     check_separations3d,
     relax_positions3d,
     snapshot_edges3d,
+    snapshot_simulation3d,
     solve_viscosity3d,
+    step_pressure3d,
 )
 from rheograph.graphs.targets import TargetSpec
 from rheograph.io.configurations import Snapshots, wrap_into_box, wrap_into_box3d
 from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.io.snapshots import read_snapshots
 from rheograph.resources import check_memory, graph_bytes
+from rheograph.sim.integrator import particle_pressure, solve_configurations
 
 TARGETS = ("viscosity", "pressure", "z_mu")
 # the step settings of the one-solve input (rheograph.graphs.features.solve_viscosity): numerics of the
@@ -217,6 +224,7 @@ def snapshot_graphs(
     solve_numerics: dict | None = None,
     training: bool = True,
     workers: int = 1,
+    solve_device: torch.device | None = None,
 ) -> list[Data]:
     """Graphs of the snapshots of one source (a path of any kind ``rheograph.io.snapshots`` reads, or a
     ``Snapshots``).
@@ -226,7 +234,10 @@ def snapshot_graphs(
     ``solve_numerics``: the step settings of the one-solve input (``disp_max``, ``dt_max``,
     ``lagged_step_control``) — a model's own, from its bundle; None takes the source's (how the training
     graphs of its simulation are built). ``workers`` > 1: the snapshots (their one solve, relaxation and
-    edges) are split between that many processes; the graphs are the same."""
+    edges) are split between that many processes; the graphs are the same.  ``solve_device``: the
+    resistance problems of those solves and relaxations solved together on that torch device, in dense
+    batches (``rheograph.graphs.batched_solve``; None: the sparse solver, one snapshot after the other);
+    the graphs differ by round-off."""
     snaps = source if isinstance(source, Snapshots) else read_snapshots(source)
     path = snaps.source
     if snaps.radii_nominal:
@@ -335,7 +346,7 @@ def snapshot_graphs(
         }
         for k, idx in enumerate(keep)
     ]
-    shared = (radii, edges, solve_params, settings, snaps.phi, run_id)
+    shared = (radii, edges, solve_params, settings, snaps.phi, run_id, solve_device)
     workers = min(int(workers), len(jobs))
     if workers <= 1:
         return _graphs_of_snapshots(shared, jobs)
@@ -379,26 +390,15 @@ def _graph_arrays_of_snapshots(shared: tuple, jobs: list[dict]) -> list[dict]:
 def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
     """The graphs of ``jobs`` (one snapshot's positions, offset, noise, contacts, targets, ... each) of
     one source whose ``shared`` values are (radii, the box's edges (lx, ly) or (lx, ly, lz), solve
-    parameters, settings, phi, run_id): relaxed first where ``settings.relax_strain``, then its one
-    solve, edges and inputs."""
-    radii, edges, solve_params, settings, phi, run_id = shared
+    parameters, settings, phi, run_id, solve device): relaxed first where ``settings.relax_strain``, then
+    its one solve, edges and inputs."""
+    radii, edges, solve_params, settings, phi, run_id, solve_device = shared
+    if solve_device is not None:
+        solved = _solved_together(jobs, radii, edges, solve_params, settings, solve_device)
+    else:
+        solved = [_solved_alone(job, radii, edges, solve_params, settings) for job in jobs]
     graphs = []
-    for job in jobs:
-        positions, offset = job["positions"], job["le_offset"]
-        # the strain the snapshot was relaxed by (NaN: not relaxed); short of relax_strain for a packing
-        # that arrested within the step budget, which predictions flag
-        relaxed, relaxation = np.nan, None
-        if settings.relax_strain and len(edges) == 3:
-            relaxation = relax_positions3d(
-                positions.copy(), radii, (*edges, offset), solve_params, settings.relax_strain
-            )
-            positions, offset, relaxed = relaxation[:3]
-        elif settings.relax_strain:
-            lx, ly = edges
-            relaxation = relax_positions(
-                positions.copy(), radii, lx, ly, offset, solve_params, settings.relax_strain
-            )
-            positions, offset, relaxed = relaxation[:3]
+    for job, (positions, offset, relaxed, relaxation, eta) in zip(jobs, solved):
         graphs.append(
             snapshot_graph(
                 positions,
@@ -414,9 +414,53 @@ def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
                 run_id=run_id,
                 relaxed_strain=float(relaxed),
                 relaxation=relaxation,
+                eta=eta,
             )
         )
     return graphs
+
+
+def _solved_alone(job: dict, radii, edges, solve_params, settings) -> tuple:
+    """(positions, le_offset, relaxed strain, relaxation, None) of one snapshot: relaxed where
+    ``settings.relax_strain`` (the strain it was relaxed by; NaN: not relaxed; short of relax_strain for a
+    packing that arrested within the step budget, which predictions flag); its one solve is left to
+    ``snapshot_graph``."""
+    positions, offset = job["positions"], job["le_offset"]
+    if not settings.relax_strain:
+        return positions, offset, np.nan, None, None
+    if len(edges) == 3:
+        relaxation = relax_positions3d(
+            positions.copy(), radii, (*edges, offset), solve_params, settings.relax_strain
+        )
+    else:
+        relaxation = relax_positions(
+            positions.copy(), radii, *edges, offset, solve_params, settings.relax_strain
+        )
+    return relaxation.positions, relaxation.le_offset, relaxation.strain, relaxation, None
+
+
+def _solved_together(jobs: list[dict], radii, edges, solve_params, settings, device) -> list[tuple]:
+    """What ``_solved_alone`` gives for each of ``jobs``, with the one solve's eta_r: the simulations of
+    all snapshots stepped together, their problems solved on ``device`` in dense batches."""
+    solve_batch = DenseBatchSolver(device)
+
+    def simulation(positions, offset):
+        if len(edges) == 3:
+            return snapshot_simulation3d(positions, radii, (*edges, offset), solve_params)
+        return snapshot_simulation(positions, radii, (*edges, offset), solve_params)
+
+    states = [(job["positions"], job["le_offset"], np.nan, None) for job in jobs]
+    if settings.relax_strain:
+        pressure = step_pressure3d if len(edges) == 3 else particle_pressure
+        sims = [simulation(positions, offset)[1] for positions, offset, *_ in states]
+        relaxations = relax_simulations(sims, settings.relax_strain, None, pressure, solve_batch)
+        states = [(r.positions, r.le_offset, r.strain, r) for r in relaxations]
+    etas = [None] * len(jobs)
+    if "disp_max" in solve_params and np.isfinite(float(solve_params["stress"])):
+        made = [simulation(positions, offset) for positions, offset, *_ in states]
+        results = solve_configurations([sim for _, sim in made], solve_batch=solve_batch)
+        etas = [one_solve_viscosity(sim_params, result) for (sim_params, _), result in zip(made, results)]
+    return [(*state, eta) for state, eta in zip(states, etas)]
 
 
 def snapshot_graph(
@@ -433,6 +477,7 @@ def snapshot_graph(
     run_id: int = 0,
     relaxed_strain: float = np.nan,
     relaxation=None,
+    eta: float | None = None,
 ) -> Data:
     """The graph of one snapshot: positions (N, 2) [a], radii (N,) [a], box = (lx, ly, le_offset) [a]
     (a 3D snapshot: positions (N, 3), box = (lx, ly, lz, le_offset), ``rheograph.graphs.features3d``);
@@ -440,18 +485,21 @@ def snapshot_graph(
     is computed, else its input and physics row are NaN), ``conditions`` the snapshot's known ``phi``
     and ``position_noise`` [a], ``targets`` (eta_r, Pi [sigma0], Z_mu) (NaN where unknown),
     ``relaxation`` the ``rheograph.graphs.features.Relaxation`` that produced ``positions`` (its
-    observables are the RELAXED_GRAPH_INPUTS)."""
+    observables are the RELAXED_GRAPH_INPUTS), ``eta`` its one solve's eta_r where already computed
+    (``rheograph.graphs.batched_solve``)."""
     stress = float(params["stress"])
     # one resistance solve per snapshot: an input where the graph has it, and the physics-only row
     solvable = "disp_max" in params and np.isfinite(stress)
     if len(box) == 4:  # 3D: the box's volume takes the place of the area
         size = box[0] * box[1] * box[2]
-        eta = solve_viscosity3d(positions, radii, box, params) if solvable else np.nan
+        if eta is None:
+            eta = solve_viscosity3d(positions, radii, box, params) if solvable else np.nan
         edge_index, feats, pairs = snapshot_edges3d(positions, radii, box, settings.cutoff, params, contacts)
     else:
         lx, ly, le_offset = box
         size = lx * ly
-        eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if solvable else np.nan
+        if eta is None:
+            eta = solve_viscosity(positions, radii, lx, ly, le_offset, params) if solvable else np.nan
         edge_index, feats, pairs = snapshot_edges(
             positions, radii, lx, ly, le_offset, settings.cutoff, params, contacts
         )

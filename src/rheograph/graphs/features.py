@@ -47,7 +47,14 @@ import numpy as np
 from rheograph.errors import InputError
 from rheograph.sim.contacts import SLIDE
 from rheograph.sim.geometry import neighbour_pairs, pair_geometry
-from rheograph.sim.integrator import SimState, Simulation, SimulationBase, particle_pressure
+from rheograph.sim.integrator import (
+    SimState,
+    Simulation,
+    SimulationBase,
+    own_solvers,
+    particle_pressure,
+    step_together,
+)
 from rheograph.sim.params import SimParams
 
 PAPER_EDGE_FEATURES = ("gap", "distance", "dx", "dy", "sin", "cos")
@@ -369,6 +376,14 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
     at 0.92 after one pass, 0.944 after two, 0.946 after three; with the recorded springs, 0.978 (a
     one-off measurement; the reproducible effect: docs/validation/surrogate_accuracy.md, the contact history).
     """
+    sim_params, sim = snapshot_simulation(positions, radii, (lx, ly, le_offset), params)
+    return one_solve_viscosity(sim_params, sim.solve_configuration(passes))
+
+
+def snapshot_simulation(positions, radii, box, params: dict) -> tuple[SimParams, Simulation]:
+    """A stress-controlled implicit ``Simulation`` started from one snapshot (no contact history):
+    positions (N, 2) [a], box = (lx, ly, le_offset) [a], ``params`` the run's parameter mapping."""
+    lx, ly, le_offset = box
     sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
     snapshot = SimState(
         positions=np.array(positions, dtype=np.float64),
@@ -377,7 +392,11 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
         ly=ly,
         le_offset=le_offset,
     )
-    result = Simulation(sim_params, snapshot).solve_configuration(passes)
+    return sim_params, Simulation(sim_params, snapshot)
+
+
+def one_solve_viscosity(sim_params, result) -> float:
+    """eta_r = sigma / shear rate of a snapshot's one solve (``result``, the last pass's step)."""
     if result.shear_rate == 0.0:
         raise InputError("solve_viscosity: the snapshot's resistance solve gives a zero shear rate")
     return sim_params.stress / result.shear_rate
@@ -428,43 +447,47 @@ def relax_positions(
     repaired against what is forgotten.  The repair takes more strain in looser packings: after noise of
     0.01 a the largest overlap is back at the simulator's own after 0.01 strain at phi = 0.76 (N = 400)
     and after 0.05 at phi = 0.72 (tests/test_imaging.py)."""
-    sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
-    sim = Simulation(
-        sim_params,
-        SimState(
-            positions=np.array(positions, dtype=np.float64),
-            radii=np.asarray(radii, dtype=np.float64),
-            lx=lx,
-            ly=ly,
-            le_offset=le_offset,
-        ),
-    )
-    return relax_simulation(sim, strain, max_steps, particle_pressure)
+    _, sim = snapshot_simulation(positions, radii, (lx, ly, le_offset), params)
+    return relax_simulations([sim], strain, max_steps, particle_pressure)[0]
 
 
-def relax_simulation(sim: SimulationBase, strain: float, max_steps: int | None, pressure) -> Relaxation:
-    """``relax_positions`` of a fresh stress-controlled simulation ``sim`` of either dimension:
-    ``pressure`` maps its recorded ``StepResult`` to Pi [sigma0]."""
-    stress = sim.params.stress
-    viscosity_early = math.nan
+def relax_simulations(
+    sims: list[SimulationBase], strain: float, max_steps: int | None, pressure, solve_batch=own_solvers
+) -> list[Relaxation]:
+    """``relax_positions`` of fresh stress-controlled simulations ``sims`` of either dimension, stepped
+    together (``step_together``: ``solve_batch`` solves their linear problems, by default each its own
+    sparse solver); ``pressure`` maps a recorded ``StepResult`` to Pi [sigma0].  Each simulation stops
+    at ``strain`` or after the step budget, as it would alone."""
+    viscosity_early = [math.nan] * len(sims)
+    moving = list(range(len(sims)))
     for _ in range(RELAX_MAX_STEPS if max_steps is None else max_steps):
-        if sim.state.strain >= strain:
+        moving = [k for k in moving if sims[k].state.strain < strain]
+        if not moving:
             break
-        result = sim.step()
-        if math.isnan(viscosity_early) and sim.state.strain >= 0.25 * strain:
-            viscosity_early = _viscosity(stress, result.shear_rate)
-    relaxed = sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)
-    # the observables of the relaxed configuration: one more solve, whose move is discarded
-    result = sim.step(record=True)
-    if math.isnan(viscosity_early):  # a creeping packing short of a quarter of the strain
-        viscosity_early = _viscosity(stress, result.shear_rate)
-    return Relaxation(
-        *relaxed,
-        viscosity=_viscosity(stress, result.shear_rate),
-        pressure=pressure(result),
-        z_mu=2.0 * result.n_frictional / sim.state.radii.size,
-        viscosity_early=viscosity_early,
-    )
+        results = step_together([sims[k] for k in moving], solve_batch)
+        for k, result in zip(moving, results):
+            if math.isnan(viscosity_early[k]) and sims[k].state.strain >= 0.25 * strain:
+                viscosity_early[k] = _viscosity(sims[k].params.stress, result.shear_rate)
+    relaxed = [
+        (sim.state.positions.copy(), float(sim.state.le_offset), float(sim.state.strain)) for sim in sims
+    ]
+    # the observables of the relaxed configurations: one more solve, whose move is discarded
+    results = step_together(sims, solve_batch, record=True)
+    relaxations = []
+    for sim, state, early, result in zip(sims, relaxed, viscosity_early, results):
+        stress = sim.params.stress
+        if math.isnan(early):  # a creeping packing short of a quarter of the strain
+            early = _viscosity(stress, result.shear_rate)
+        relaxations.append(
+            Relaxation(
+                *state,
+                viscosity=_viscosity(stress, result.shear_rate),
+                pressure=pressure(result),
+                z_mu=2.0 * result.n_frictional / sim.state.radii.size,
+                viscosity_early=early,
+            )
+        )
+    return relaxations
 
 
 # ---- target transforms ---------------------------------------------------------------------------

@@ -32,13 +32,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from rheograph.errors import InputError
 from rheograph.graphs.features import (
     Relaxation,
     contact_history,
+    one_solve_viscosity,
     pair_records,
     refuse_centres_inside,
-    relax_simulation,
+    relax_simulations,
 )
 from rheograph.sim.geometry3d import neighbour_pairs, pair_geometry
 from rheograph.sim.integrator3d import SimState3D, Simulation3D
@@ -114,7 +114,7 @@ def snapshot_edges3d(positions, radii, box3, cutoff, params, contacts=None):
     return edge_index, feats, p
 
 
-def _simulation(positions, radii, box3, params: dict) -> tuple[SimParams3D, Simulation3D]:
+def snapshot_simulation3d(positions, radii, box3, params: dict) -> tuple[SimParams3D, Simulation3D]:
     """A stress-controlled implicit ``Simulation3D`` started from one snapshot (no contact history)."""
     lx, ly, lz, le_offset = box3
     mapping = {k: v for k, v in params.items() if k != "dim"}
@@ -134,11 +134,8 @@ def solve_viscosity3d(positions, radii, box3, params: dict, passes: int = 2) -> 
     """Relative viscosity eta_r of one stress-controlled resistance solve on a 3D snapshot: the 2D
     ``solve_viscosity`` with the 3D simulator's step (``Simulation3D.solve_configuration``:
     the tangential springs unstretched, dt assumed as a running simulation would after ``passes``)."""
-    sim_params, sim = _simulation(positions, radii, box3, params)
-    result = sim.solve_configuration(passes)
-    if result.shear_rate == 0.0:
-        raise InputError("solve_viscosity: the snapshot's resistance solve gives a zero shear rate")
-    return sim_params.stress / result.shear_rate
+    sim_params, sim = snapshot_simulation3d(positions, radii, box3, params)
+    return one_solve_viscosity(sim_params, sim.solve_configuration(passes))
 
 
 def relax_positions3d(
@@ -146,5 +143,10 @@ def relax_positions3d(
 ) -> Relaxation:
     """The 2D ``relax_positions`` with the 3D simulator: the snapshot sheared by ``strain`` at its
     imposed stress; the returned ``positions`` are (N, 3) and ``pressure`` is -tr(sigma)/3."""
-    _, sim = _simulation(positions, radii, box3, params)
-    return relax_simulation(sim, strain, max_steps, lambda result: particle_pressure(result.stress))
+    _, sim = snapshot_simulation3d(positions, radii, box3, params)
+    return relax_simulations([sim], strain, max_steps, step_pressure3d)[0]
+
+
+def step_pressure3d(result) -> float:
+    """Pi = -tr(sigma)/3 [sigma0] of a recorded 3D ``StepResult``."""
+    return particle_pressure(result.stress)

@@ -55,6 +55,7 @@ import numpy as np
 import torch
 
 from rheograph.errors import InputError
+from rheograph.graphs.batched_solve import PHYSICS_SOLVERS, physics_solver_device
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, snapshot_graphs
 from rheograph.graphs.radii_estimate import snapshots_with_estimated_radii, species_spread
 from rheograph.io.configurations import NOMINAL_PHI_TOLERANCE, PHYSICAL_PARAMS, Snapshots
@@ -264,7 +265,10 @@ def ensemble_mean_std(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class Surrogate:
     """An ensemble of fold models with what they were trained on (``domain``) and, for a shipped model,
     its card; ``load_model`` makes one. ``device``: where the networks run (``resolve_device``);
-    ``workers``: processes that build the snapshots' graphs and physics inputs (1: this one)."""
+    ``workers``: processes that build the snapshots' graphs and physics inputs (1: this one);
+    ``physics_solver``: how those physics inputs' resistance problems are solved (``auto``: in dense
+    batches on a CUDA ``device`` up to ``DENSE_DOF_LIMIT`` rows, else the sparse solver on the CPU;
+    ``sparse``; ``dense``: in dense batches on ``device``, a CPU too; rheograph.graphs.batched_solve)."""
 
     def __init__(
         self,
@@ -273,6 +277,7 @@ class Surrogate:
         network_class: type | None = None,
         device="cpu",
         workers: int = 1,
+        physics_solver: str = "auto",
     ):
         if not bundle_paths:
             raise InputError("no model bundles (fold*.pt) given: name a shipped model or a training run")
@@ -281,6 +286,8 @@ class Surrogate:
         self.label = label
         self.device = resolve_device(device)
         self.workers = workers
+        physics_solver_device(physics_solver, self.device, 0)  # an unknown choice refused here
+        self.physics_solver = physics_solver
         self.paths = sorted(bundle_paths)
         self.models = [load_bundle(p, network_class) for p in self.paths]
         for module, _, _ in self.models:
@@ -398,6 +405,9 @@ class Surrogate:
             solve_numerics=self.solve_numerics(snaps.phi, snaps.n_particles),
             training=False,
             workers=self.workers,
+            solve_device=physics_solver_device(
+                self.physics_solver, self.device, snaps.n_particles * (6 if snaps.dim == 3 else 3)
+            ),
         )
         positions_only = not self.settings.stress_known
         if positions_only:
@@ -538,15 +548,22 @@ class Surrogate:
 
 
 def load_model(
-    name_or_path: str | Path, network_class: type | None = None, device="cpu", workers: int = 1
+    name_or_path: str | Path,
+    network_class: type | None = None,
+    device="cpu",
+    workers: int = 1,
+    physics_solver: str = "auto",
 ) -> Surrogate:
     """A shipped model by name (``rheograph.list_models()``), a training run directory or a bundle.
     ``network_class``: the ``SurrogateModule`` subclass its bundles name, when it is not registered
     otherwise (rheograph.learn.networks); nothing named in the bundles is imported.  ``device`` (``cpu``,
     ``cuda``, ``auto``) runs its networks there, ``workers`` processes build the snapshots' graphs and
-    physics inputs (the predictions are the same)."""
+    physics inputs (the predictions are the same), solving their resistance problems as
+    ``physics_solver`` says (``Surrogate``; the predictions differ by round-off)."""
     paths, label = model_paths(name_or_path)
-    return Surrogate(paths, label, network_class, device=device, workers=workers)
+    return Surrogate(
+        paths, label, network_class, device=device, workers=workers, physics_solver=physics_solver
+    )
 
 
 # ---- command line ---------------------------------------------------------------------------------
@@ -632,6 +649,14 @@ def main(argv=None) -> None:
         default=1,
         help="processes building the snapshots' graphs and physics inputs (one solve each; default 1)",
     )
+    ap.add_argument(
+        "--physics-solver",
+        choices=PHYSICS_SOLVERS,
+        default="auto",
+        help="how the physics inputs' resistance problems are solved: auto (default: in dense batches on a "
+        "CUDA --device up to N = 4000 in 2D, 2000 in 3D; else sparse on the CPU), sparse, or dense (in "
+        "batches on --device, a CPU too); the predictions differ by round-off",
+    )
     args = ap.parse_args(argv)
     if args.list_models:
         for name in list_models():
@@ -658,7 +683,7 @@ def main(argv=None) -> None:
     device = resolve_device(args.device, "--device")
     if args.workers < 1:
         raise InputError(f"--workers {args.workers}: allowed an integer >= 1")
-    model = load_model(args.models, device=device, workers=args.workers)
+    model = load_model(args.models, device=device, workers=args.workers, physics_solver=args.physics_solver)
     given = dict(_parse_param(p) for p in args.param)
     tables = []
     for path in args.input:

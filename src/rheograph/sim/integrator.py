@@ -394,16 +394,7 @@ class SimulationBase(ABC):
         from the same configuration and assumes DT_GROWTH x the dt the previous one would step with (the
         first, ``disp_max``).  The state is left as after the last pass's step; the neighbour list, the
         sparsity pattern and the symbolic factorisation are made once (a third of a pass's cost)."""
-        if self.state.steps:
-            raise ValueError("solve_configuration needs a fresh simulation (no step taken)")
-        start = copy.deepcopy(self.state)
-        for k in range(passes):
-            if k:
-                # step() has left dt_assumed at DT_GROWTH x its dt (at most dt_max): the next pass assumes it
-                self.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=self.state.dt_assumed)
-                self.max_displacement = 0.0
-            result = self.step()
-        return result
+        return solve_configurations([self], passes)[0]
 
     # ---- neighbour list and sparsity pattern --------------------------------------------------
     def _rebuild_neighbours(self) -> None:
@@ -446,31 +437,55 @@ class SimulationBase(ABC):
     def step(self, record: bool = False) -> StepResult:
         """Advance one step (explicit Euler or linearly implicit springs: ``params.integrator``); ``record``
         adds the full stress tensors and the contact list."""
-        s, p = self.state, self.params
+        lp = self.prepare_step()
+        return self.complete_step(lp, self.solve_linear(lp), record)
+
+    def prepare_step(self) -> LinearProblem:
+        """A step's first part: the neighbour list rebuilt where stale, and the step's linear problem (the
+        contact states updated in place).  ``solve_linear`` (or a solver of several simulations' problems
+        at once, ``step_together``) solves it and ``complete_step`` finishes the step."""
         clock = wallclock.perf_counter
-        timings = self.timings
         t0 = clock()
         if self._list_is_stale():
             self._rebuild_neighbours()
         t1 = clock()
-        timings["neighbours"] += t1 - t0
-        radii = s.radii
+        self.timings["neighbours"] += t1 - t0
         lp = self.linear_problem()
+        self.timings["assembly"] += clock() - t1
+        return lp
+
+    def solve_linear(self, lp: LinearProblem) -> np.ndarray:
+        """Velocities (N DOF, 2) [a / time unit] of R_FU U = ``lp.rhs`` (its columns: springs, unit-rate
+        affine flow), by this simulation's sparse Cholesky solver."""
+        clock = wallclock.perf_counter
         # (N DOF, 2) with contiguous columns: both right-hand sides solved in one pass over the factor
         rhs = lp.rhs.T
         t2 = clock()
-        timings["assembly"] += t2 - t1
         if lp.n_active:
             self.solver.factorize(lp.data)
             t3 = clock()
-            timings["factorisation"] += t3 - t2
+            self.timings["factorisation"] += t3 - t2
             vels = self.solver.solve(rhs)
         else:  # nothing interacts: R_FU is the one-body drag, a diagonal
             t3 = clock()
             vels = rhs / self.drag[:, None]
-        vel_const, vel_rate = np.ascontiguousarray(vels[:, 0]), np.ascontiguousarray(vels[:, 1])
+        self.timings["solve"] += clock() - t3
+        return vels
+
+    def pattern(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """The current matrix's upper-triangle CSC pattern: (indptr, indices, number of rows), on which
+        ``LinearProblem.data`` lies."""
+        return self.indptr, self.indices, self.DOF * self.state.radii.shape[0]
+
+    def complete_step(self, lp: LinearProblem, vels: np.ndarray, record: bool = False) -> StepResult:
+        """A step's last part, from its linear problem ``lp`` (``prepare_step``) and the solution ``vels``
+        (N DOF, 2): the shear rate, dt, the stresses where ``record``ed, and the move."""
+        s, p = self.state, self.params
+        clock = wallclock.perf_counter
+        timings = self.timings
         t4 = clock()
-        timings["solve"] += t4 - t3
+        radii = s.radii
+        vel_const, vel_rate = np.ascontiguousarray(vels[:, 0]), np.ascontiguousarray(vels[:, 1])
 
         # stress split S = S_0 + rate * S_1 and the exact rate that meets the target
         lub0, dash0, lub1, dash1, spring = self.stress_sums(vel_const, vel_rate, lp, record)
@@ -533,6 +548,44 @@ class SimulationBase(ABC):
         s.steps += 1
         timings["update"] += clock() - t5
         return result
+
+
+def own_solvers(sims: list[SimulationBase], problems: list[LinearProblem]) -> list[np.ndarray]:
+    """Each simulation's problem solved by its own sparse solver, one after the other: the default of
+    ``step_together``.  Any function of this signature may take its place, e.g. one that solves the
+    problems of many snapshots together on a GPU (``rheograph.graphs.batched_solve``)."""
+    return [sim.solve_linear(lp) for sim, lp in zip(sims, problems)]
+
+
+def step_together(
+    sims: list[SimulationBase], solve_batch=own_solvers, record: bool = False
+) -> list[StepResult]:
+    """One step of each of ``sims``, their linear problems solved together by ``solve_batch(sims,
+    problems)`` -> velocities (N DOF, 2) each; with ``own_solvers``, exactly ``[sim.step() for sim in
+    sims]``."""
+    problems = [sim.prepare_step() for sim in sims]
+    velocities = solve_batch(sims, problems)
+    return [sim.complete_step(lp, vel, record) for sim, lp, vel in zip(sims, problems, velocities)]
+
+
+def solve_configurations(
+    sims: list[SimulationBase], passes: int = 2, solve_batch=own_solvers
+) -> list[StepResult]:
+    """``SimulationBase.solve_configuration`` of each of ``sims`` (fresh simulations), their passes taken
+    together (``step_together``)."""
+    if passes < 1:
+        raise ValueError(f"solve_configuration takes at least one pass, not {passes}")
+    if any(sim.state.steps for sim in sims):
+        raise ValueError("solve_configuration needs a fresh simulation (no step taken)")
+    starts = [copy.deepcopy(sim.state) for sim in sims]
+    for k in range(passes):
+        if k:
+            # step() has left dt_assumed at DT_GROWTH x its dt (at most dt_max): the next pass assumes it
+            for sim, start in zip(sims, starts):
+                sim.state = dataclasses.replace(copy.deepcopy(start), dt_assumed=sim.state.dt_assumed)
+                sim.max_displacement = 0.0
+        results = step_together(sims, solve_batch)
+    return results
 
 
 class Simulation(SimulationBase):

@@ -1,0 +1,100 @@
+"""The resistance problems of many snapshots solved together: dense Cholesky in batches on a torch device.
+
+A snapshot's physics inputs (its one solve, and the relaxation of the imaging models) are steps of the
+simulator, each dominated by a sparse Cholesky factorisation of R_FU (``rheograph.sim.solver``): about
+2 ms at N = 400 in 2D on one core, one snapshot after the other.  A GPU factorises many dense matrices
+of a few thousand rows at once (``torch.linalg.cholesky_ex`` on a batch), so there the simulations of a
+set of snapshots are stepped together (``rheograph.sim.integrator.step_together``): each assembles its
+problem on the CPU, the batch is solved on the device, each finishes its step.  A dense factorisation
+costs n^3 / 3 for n = N DOF rows against the sparse one's far smaller count, so on a CPU the sparse
+solver stays faster at every N (``python -m bench.gpu --parts f`` measures both), and beyond
+``DENSE_DOF_LIMIT`` rows the dense matrices no longer pay on a GPU either: those snapshots keep the
+sparse path.
+
+Both are exact direct solvers of the same symmetric positive-definite systems: the physics inputs
+differ by round-off (tests/test_batched_solve.py).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+import torch
+
+from rheograph.errors import InputError
+
+# rows of R_FU (N x DOF) up to which a GPU solves the problems as dense matrices: N = 4000 in 2D, 2000 in
+# 3D; a dense matrix of this size holds 1.15 GB in float64
+DENSE_DOF_LIMIT = 12_000
+# dense matrices held at once per batch [bytes]: the matrices, their factors and the symmetrised copy
+DENSE_BATCH_BYTES = 2**31
+PHYSICS_SOLVERS = ("auto", "sparse", "dense")
+
+
+def physics_solver_device(choice: str, device: torch.device, n_dof: int) -> torch.device | None:
+    """The device on which the physics inputs' problems of ``n_dof`` rows are solved as dense batches,
+    or None for the sparse solver on the CPU, one snapshot after the other.  ``choice``: ``auto`` (dense
+    on a CUDA ``device`` up to ``DENSE_DOF_LIMIT`` rows, else sparse), ``sparse`` or ``dense`` (on
+    ``device``, whatever the size; what the tests compare on a CPU)."""
+    if choice not in PHYSICS_SOLVERS:
+        raise InputError(f"physics_solver={choice!r} is unknown: allowed {list(PHYSICS_SOLVERS)}")
+    if choice == "dense":
+        return device
+    if choice == "auto" and device.type == "cuda" and n_dof <= DENSE_DOF_LIMIT:
+        return device
+    return None
+
+
+class DenseBatchSolver:
+    """A ``solve_batch`` for ``step_together``: the problems of several simulations solved on ``device``
+    by batched dense Cholesky, in float64, at most ``max_bytes`` of dense matrices at a time.
+
+    A problem with nothing interacting (a diagonal drag) and one whose dense factorisation fails (not
+    positive definite at round-off) are handed to the simulation's own sparse solver, which solves the
+    one and reports the other as it does in a simulation."""
+
+    def __init__(self, device: torch.device, max_bytes: int = DENSE_BATCH_BYTES):
+        self.device = torch.device(device)
+        self.max_bytes = int(max_bytes)
+
+    def __call__(self, sims, problems) -> list[np.ndarray]:
+        velocities: list = [None] * len(sims)
+        by_rows = defaultdict(list)  # problems of equal size share a batch
+        for k, (sim, lp) in enumerate(zip(sims, problems)):
+            if lp.n_active:
+                by_rows[sim.pattern()[2]].append(k)
+            else:
+                velocities[k] = sim.solve_linear(lp)
+        for n_dof, members in by_rows.items():
+            # the matrices, their factors and the symmetrised copy: three n^2 float64 arrays each
+            per_batch = max(1, self.max_bytes // (3 * 8 * n_dof * n_dof))
+            for start in range(0, len(members), per_batch):
+                chunk = members[start : start + per_batch]
+                solved = self._solve([sims[k] for k in chunk], [problems[k] for k in chunk], n_dof)
+                for k, vel in zip(chunk, solved):
+                    velocities[k] = vel
+        return velocities
+
+    def _solve(self, sims, problems, n_dof: int) -> list[np.ndarray]:
+        batch = len(sims)
+        dense = torch.zeros((batch, n_dof * n_dof), dtype=torch.float64, device=self.device)
+        for b, (sim, lp) in enumerate(zip(sims, problems)):
+            indptr, indices, _ = sim.pattern()
+            # the upper triangle in CSC: entry (row, column) at row * n + column of the row-major matrix
+            columns = np.repeat(np.arange(n_dof), np.diff(indptr))
+            flat = torch.from_numpy(indices.astype(np.int64) * n_dof + columns).to(self.device)
+            dense[b].index_put_((flat,), torch.from_numpy(lp.data).to(self.device), accumulate=True)
+        upper = dense.view(batch, n_dof, n_dof)
+        matrix = upper + upper.transpose(1, 2)
+        matrix.diagonal(dim1=1, dim2=2).mul_(0.5)
+        del dense, upper
+        factor, info = torch.linalg.cholesky_ex(matrix)
+        del matrix
+        rhs = torch.from_numpy(np.stack([lp.rhs.T for lp in problems])).to(self.device)
+        solution = torch.cholesky_solve(rhs, factor).cpu().numpy()
+        failed = info.cpu().numpy()
+        return [
+            sim.solve_linear(lp) if failed[b] else np.ascontiguousarray(solution[b])
+            for b, (sim, lp) in enumerate(zip(sims, problems))
+        ]
