@@ -21,10 +21,15 @@ its own. Parts (``--parts``, default all):
   physics inputs (graphs with their one resistance solve, spring pressure, contact counts; on the CPU,
   ``--workers`` processes) and the networks' forward passes (five fold models) timed apart, each the
   median of ``--repeats`` after a warm-up.
+* ``f``: where dense batches pay: one resistance problem's solve (factorisation and the two right-hand
+  sides) by the sparse Cholesky on one CPU core against the dense batched Cholesky on ``--device`` (the
+  time of a batch divided by its problems), at 2D N = 400 to 4000 and 3D N = 500 to 2000 (on a CPU
+  up to 3000 rows of R_FU), each the median of ``--repeats`` after a warm-up; the row count at which
+  the dense one stops paying is ``rheograph.graphs.batched_solve.DENSE_MAX_PARTICLES``'s measure.
 * ``e``: with ``--device cuda``, the CPU figures of a and d in the same run (with ``--cpu-fold`` also b's
   fold 0 with the demo's settings), with 2 torch threads and 2 graph processes, as on a 2-core machine.
 
-The parts run in the order a, d, b, c (the quickest first).
+The parts run in the order a, d, f, b, c (the quickest first).
 
 Each part's results are written to ``--out`` as soon as it ends (a run stopped by a time limit keeps the
 finished parts). Missing optional packages (scikit-sparse: the solver falls back to qdldl) change the
@@ -52,7 +57,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-PARTS = ("a", "b", "c", "d", "e")
+PARTS = ("a", "b", "c", "d", "e", "f")
 N400_FILES = "data/paper/multirun/N400_phi0.76_*/trajectory.h5"
 N2000_FILE = "data/paper/multirun/N2000_phi0.76_s10_seed1_d0.002_implicit/trajectory.h5"
 N20000_FILE = "data/large_n/multirun/N20000_phi0.76_s10_seed1_d0.002_implicit/trajectory.h5"
@@ -126,6 +131,7 @@ def environment(device: torch.device, args) -> dict:
         "repeats": args.repeats,
         "workers": args.workers,
         "cpu_side_threads": 2,
+        "torch_threads": torch.get_num_threads(),
         "started": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     return info
@@ -401,8 +407,18 @@ def prediction(
         model = load_model(model_name, device=device, workers=workers)
         numerics = model.solve_numerics(snaps.phi, snaps.n_particles)
 
-        def physics(model=model, snaps=snaps, numerics=numerics):
-            return snapshot_graphs(snaps, model.settings, 0, numerics, training=False, workers=model.workers)
+        solve_device = model.physics_device(snaps)
+
+        def physics(model=model, snaps=snaps, numerics=numerics, solve_device=solve_device):
+            return snapshot_graphs(
+                snaps,
+                model.settings,
+                0,
+                numerics,
+                training=False,
+                workers=model.workers,
+                solve_device=solve_device,
+            )
 
         # the large snapshot's solve takes seconds: two timed calls, the kernels compiled by the others
         large = snaps.n_particles >= 10_000
@@ -432,6 +448,7 @@ def prediction(
             "fold_models": len(model.models),
             "device": str(device),
             "workers": workers,
+            "physics_solver": "sparse, CPU" if solve_device is None else f"dense batches, {solve_device}",
             "physics_seconds": physics_s,
             "physics_all": physics_all,
             "forward_seconds": forward_s,
@@ -447,11 +464,72 @@ def prediction(
     return rows
 
 
+# part f's systems: (dimension, N, phi); a CPU stops at 3000 rows of R_FU (dense n^3/3 beyond is minutes)
+CROSSOVER_SIZES = (
+    (2, 400, 0.76),
+    (2, 1000, 0.76),
+    (2, 2000, 0.76),
+    (2, 4000, 0.76),
+    (3, 500, 0.56),
+    (3, 1000, 0.56),
+    (3, 2000, 0.56),
+)
+CPU_DENSE_ROWS = 3000
+
+
+def solver_crossover(device: torch.device, repeats: int, quick: bool) -> list[dict]:
+    """Part f: one resistance problem solved by the sparse Cholesky (one CPU core) and, per problem, by
+    the dense batched Cholesky on ``device`` (a batch of copies of it, as many as half a GB of dense
+    matrices holds, at least 2), for each of CROSSOVER_SIZES: a fresh configuration stepped 5 times
+    (lubricated gaps; the pattern of a sheared one)."""
+    from rheograph.graphs.batched_solve import DenseBatchSolver
+    from rheograph.sim import SimParams, Simulation
+    from rheograph.sim.integrator3d import Simulation3D
+    from rheograph.sim.params3d import SimParams3D
+
+    sizes = ((2, 100, 0.76), (3, 60, 0.56)) if quick else CROSSOVER_SIZES
+    rows = []
+    for dim, n, phi in sizes:
+        n_dof = n * (3 if dim == 2 else 6)
+        if device.type == "cpu" and n_dof > CPU_DENSE_ROWS and not quick:
+            continue
+        params = (SimParams if dim == 2 else SimParams3D)(n_particles=n, phi=phi, stress=10.0, seed=1)
+        sim = (Simulation if dim == 2 else Simulation3D)(params)
+        for _ in range(5):
+            sim.step()
+        lp = sim.prepare_step()
+        with cpu_threads(1):
+            sparse_s, _, _ = timed(lambda sim=sim, lp=lp: sim.solve_linear(lp), torch.device("cpu"), repeats)
+        batch = max(2, min(64, 2**29 // (3 * 8 * n_dof * n_dof)))
+        solver = DenseBatchSolver(device)
+        dense_s, _, _ = timed(
+            lambda sim=sim, lp=lp, solver=solver, batch=batch: solver([sim] * batch, [lp] * batch),
+            device,
+            repeats,
+        )
+        row = {
+            "dim": dim,
+            "n_particles": n,
+            "n_dof": n_dof,
+            "nonzeros": int(sim.pattern()[1].size),
+            "sparse_ms": sparse_s * 1e3,
+            "dense_batch": batch,
+            "dense_ms_per_problem": dense_s / batch * 1e3,
+            "device": str(device),
+        }
+        progress(
+            f"  f: {dim}D N = {n} ({n_dof} rows): sparse {row['sparse_ms']:.2f} ms, dense on {device} "
+            f"{row['dense_ms_per_problem']:.2f} ms per problem (batches of {batch})"
+        )
+        rows.append(row)
+    return rows
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", choices=("cpu", "cuda"), default="cuda")
     ap.add_argument("--out", required=True, help="the JSON results (rewritten after every part)")
-    ap.add_argument("--parts", default=",".join(PARTS), help="comma-separated subset of a,b,c,d,e")
+    ap.add_argument("--parts", default=",".join(PARTS), help="comma-separated subset of a,b,c,d,e,f")
     ap.add_argument("--quick", action="store_true", help="tiny sizes: a smoke run of every part")
     ap.add_argument(
         "--repeats", type=int, default=None, help="timed repeats after the warm-up (default 3, quick 1)"
@@ -484,9 +562,10 @@ def main(argv=None) -> None:
     results = Results(Path(args.out).resolve(), environment(device, args))
     progress(f"device {device}, parts {parts}, scratch {work}")
     try:
-        progress("graph cache (one resistance solve per snapshot, one process)")
-        results.set("cache", build_cache(cache_dir))
-        progress(f"  cache: {results.data['parts']['cache']['seconds']:.1f} s")
+        if set(parts) & {"a", "b", "c"}:  # the training parts read the demo set's graphs
+            progress("graph cache (one resistance solve per snapshot, one process)")
+            results.set("cache", build_cache(cache_dir))
+            progress(f"  cache: {results.data['parts']['cache']['seconds']:.1f} s")
         on_cpu = device.type == "cuda" and "e" in parts
         if "a" in parts:
             progress(f"part a: s/epoch on {device}")
@@ -515,6 +594,9 @@ def main(argv=None) -> None:
                         torch.device("cpu"), 2, 1, args.quick, cpu_side=True
                     )
                 results.write()
+        if "f" in parts:
+            progress(f"part f: sparse solves on one CPU core against dense batches on {device}")
+            results.set("f", solver_crossover(device, args.repeats, args.quick))
         if "b" in parts:
             progress(f"part b: folds {folds}, {epochs} epochs, on {device}")
             results.set("b", {str(device): fold_runs(cache_dir, device, folds, epochs, work)})

@@ -1,6 +1,7 @@
 """The markdown tables of a ``bench/gpu.py`` JSON file (for docs/howto/gpu.md).
 
 python -m bench.gpu_report gpu.json            # markdown on stdout
+python -m bench.gpu_report gpu.json --section gpu_solvers_cpu --page howto/gpu.md   # part f, published
 """
 
 from __future__ import annotations
@@ -65,18 +66,50 @@ def end_to_end_lines(part: dict) -> list[str]:
 
 def prediction_table(part: dict) -> list[str]:
     lines = [
-        "| snapshots | model (fold models) | device | graph processes | physics inputs s | forward s | "
-        "predict_snapshots s |",
-        "|---|---|---|---|---|---|---|",
+        "| snapshots | model (fold models) | device | graph processes | physics solved by | "
+        "physics inputs s | forward s | predict_snapshots s |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for device, rows in part.items():
         for r in rows:
             lines.append(
                 f"| {r['snapshots']} × {r['case']} | {r['model']} ({r['fold_models']}) | {device} | "
-                f"{r['workers']} | {_num(r['physics_seconds'])} | {_num(r['forward_seconds'], 3)} | "
+                f"{r['workers']} | {r.get('physics_solver', 'sparse, CPU')} | {_num(r['physics_seconds'])} | "
+                f"{_num(r['forward_seconds'], 3)} | "
                 f"{_num(r['predict_snapshots_seconds'])} |"
             )
     return lines
+
+
+CROSSOVER_HEADER = [
+    "dim",
+    "N",
+    "rows of R_FU",
+    "nonzeros (upper)",
+    "sparse, one core, ms",
+    "dense batched, ms per problem (batch, device)",
+    "sparse / dense",
+]
+
+
+def crossover_rows(rows: list[dict]) -> list[list[str]]:
+    return [
+        [
+            f"{r['dim']}D",
+            str(r["n_particles"]),
+            str(r["n_dof"]),
+            str(r["nonzeros"]),
+            _num(r["sparse_ms"]),
+            f"{_num(r['dense_ms_per_problem'])} ({r['dense_batch']}, {r['device']})",
+            _num(r["sparse_ms"] / r["dense_ms_per_problem"]),
+        ]
+        for r in rows
+    ]
+
+
+def crossover_table(rows: list[dict]) -> list[str]:
+    lines = ["| " + " | ".join(CROSSOVER_HEADER) + " |", "|" + "---|" * len(CROSSOVER_HEADER)]
+    return lines + ["| " + " | ".join(cells) + " |" for cells in crossover_rows(rows)]
 
 
 def render(data: dict) -> str:
@@ -113,14 +146,49 @@ def render(data: dict) -> str:
             "",
         ]
         out += prediction_table(parts["d"]) + [""]
+    if "f" in parts:
+        out += [
+            "One resistance problem solved (factorisation and two right-hand sides): the sparse Cholesky on "
+            "one CPU core against the dense batched Cholesky (a batch's time over its problems):",
+            "",
+        ]
+        out += crossover_table(parts["f"]) + [""]
     return "\n".join(out)
+
+
+def publish_crossover(data: dict, results: str, section: str, page: str | None) -> None:
+    """Part f of ``data`` (read from ``results``) as the docs section ``section``: its table and what
+    machine measured it."""
+    from bench.publishing import command_line, publish, table, text
+
+    meta = data["meta"]
+    command = command_line("gpu_report")
+    blocks = [
+        text(
+            f"Drawn by `{command}` from `python -m bench.gpu --device {meta['device']} --parts f "
+            f"--repeats {meta['repeats']} --out {results}`, measured on "
+            f"{meta['device_name'] or meta['device']} ({meta['cpu_count']} CPU cores, torch {meta['torch']}; "
+            f"the sparse solver on one core, the dense one on {meta.get('torch_threads', 'all')} torch "
+            "threads; "
+            f"medians of {meta['repeats']} after a warm-up):",
+            "",
+        ),
+        table(CROSSOVER_HEADER, crossover_rows(data["parts"]["f"])),
+    ]
+    publish(section, blocks, True, page=page, record={"results": results}, command=command)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("results", help="the JSON file bench/gpu.py wrote")
+    ap.add_argument("--section", help="publish part f's table as this docs section instead of printing")
+    ap.add_argument("--page", default=None, help="the section's page under docs/ (first publication)")
     args = ap.parse_args(argv)
-    print(render(json.loads(Path(args.results).read_text())))
+    data = json.loads(Path(args.results).read_text())
+    if args.section:
+        publish_crossover(data, args.results, args.section, args.page)
+    else:
+        print(render(data))
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ import torch
 from test_device import few_snapshots
 
 from rheograph.errors import InputError
-from rheograph.graphs.batched_solve import DENSE_DOF_LIMIT, DenseBatchSolver, physics_solver_device
+from rheograph.graphs.batched_solve import DENSE_MAX_PARTICLES, DenseBatchSolver, physics_solver_device
 from rheograph.sim import SimParams, Simulation
 from rheograph.sim.integrator import own_solvers, solve_configurations, step_together
 from rheograph.sim.integrator3d import Simulation3D
@@ -124,12 +124,12 @@ def test_graphs_with_dense_batched_physics_inputs_equal_the_sparse_ones(model, s
 
 
 def test_the_physics_solver_choice():
-    """auto: dense batches on a CUDA device up to DENSE_DOF_LIMIT rows, the sparse solver otherwise; an
+    """auto: dense batches on a CUDA device up to DENSE_MAX_PARTICLES, the sparse solver otherwise; an
     unknown choice refused in one line (the API and predict.py)."""
     cuda = torch.device("cuda")  # a device name: nothing runs on it here
-    assert physics_solver_device("auto", cuda, DENSE_DOF_LIMIT) == cuda
-    assert physics_solver_device("auto", cuda, DENSE_DOF_LIMIT + 1) is None
-    assert physics_solver_device("auto", CPU, 1200) is None
+    assert physics_solver_device("auto", cuda, DENSE_MAX_PARTICLES) == cuda
+    assert physics_solver_device("auto", cuda, DENSE_MAX_PARTICLES + 1) is None
+    assert physics_solver_device("auto", CPU, 400) is None
     assert physics_solver_device("sparse", cuda, 1200) is None
     assert physics_solver_device("dense", CPU, 10**6) == CPU
     with pytest.raises(InputError, match=r"physics_solver='qr' is unknown"):
@@ -148,3 +148,13 @@ def test_predictions_through_dense_batches_equal_the_sparse_ones():
     dense = load_model("N400_phi0.76", physics_solver="dense").predict_snapshots(snaps)
     for column in ("eta_pred", "pressure_pred", "z_mu_pred", "eta_solve", "pressure_spring", "z_mu_counted"):
         np.testing.assert_allclose(dense[column], sparse[column], rtol=1e-6)
+
+
+def test_dense_matrices_beyond_the_memory_granted_are_refused_in_one_line(monkeypatch):
+    from rheograph.resources import MEMORY_LIMIT_ENV
+
+    sims = dense_frictional_sims()[:1]
+    problems = [sim.prepare_step() for sim in sims]
+    monkeypatch.setenv(MEMORY_LIMIT_ENV, "0.0001")  # 100 kB: less than one 180 x 180 problem's three copies
+    with pytest.raises(InputError, match=r"dense matrices \(1 x 180 rows.*use physics_solver=sparse"):
+        DenseBatchSolver(CPU)(sims, problems)

@@ -7,9 +7,9 @@ of a few thousand rows at once (``torch.linalg.cholesky_ex`` on a batch), so the
 set of snapshots are stepped together (``rheograph.sim.integrator.step_together``): each assembles its
 problem on the CPU, the batch is solved on the device, each finishes its step.  A dense factorisation
 costs n^3 / 3 for n = N DOF rows against the sparse one's far smaller count, so on a CPU the sparse
-solver stays faster at every N (``python -m bench.gpu --parts f`` measures both), and beyond
-``DENSE_DOF_LIMIT`` rows the dense matrices no longer pay on a GPU either: those snapshots keep the
-sparse path.
+solver stays faster at every N (``python -m bench.gpu --parts f`` measures both: 20x at N = 400 in 2D,
+6x at N = 500 in 3D on two cores), and on a GPU the dense cost overtakes the sparse one at some N too:
+beyond ``DENSE_MAX_PARTICLES`` those snapshots keep the sparse path.
 
 Both are exact direct solvers of the same symmetric positive-definite systems: the physics inputs
 differ by round-off (tests/test_batched_solve.py).
@@ -23,25 +23,29 @@ import numpy as np
 import torch
 
 from rheograph.errors import InputError
+from rheograph.resources import check_memory
 
-# rows of R_FU (N x DOF) up to which a GPU solves the problems as dense matrices: N = 4000 in 2D, 2000 in
-# 3D; a dense matrix of this size holds 1.15 GB in float64
-DENSE_DOF_LIMIT = 12_000
+# particles up to which a GPU solves the problems as dense matrices (3D: 12 000 rows, 1.15 GB each in
+# float64).  Not yet measured on a GPU: an estimate from the sparse solver's times on one CPU core (2D
+# N = 1000 8 ms, 3D N = 500 45 ms; about 16 and 360 ms at N = 2000) against a dense Cholesky of n^3 / 3
+# at ~10 TFLOP/s in float64 (2D ~7 ms, 3D ~60 ms at N = 2000); part f of bench/gpu.py measures where the
+# two cross
+DENSE_MAX_PARTICLES = 2000
 # dense matrices held at once per batch [bytes]: the matrices, their factors and the symmetrised copy
 DENSE_BATCH_BYTES = 2**31
 PHYSICS_SOLVERS = ("auto", "sparse", "dense")
 
 
-def physics_solver_device(choice: str, device: torch.device, n_dof: int) -> torch.device | None:
-    """The device on which the physics inputs' problems of ``n_dof`` rows are solved as dense batches,
-    or None for the sparse solver on the CPU, one snapshot after the other.  ``choice``: ``auto`` (dense
-    on a CUDA ``device`` up to ``DENSE_DOF_LIMIT`` rows, else sparse), ``sparse`` or ``dense`` (on
-    ``device``, whatever the size; what the tests compare on a CPU)."""
+def physics_solver_device(choice: str, device: torch.device, n_particles: int) -> torch.device | None:
+    """The device on which the physics inputs' problems of snapshots of ``n_particles`` are solved as
+    dense batches, or None for the sparse solver on the CPU, one snapshot after the other.  ``choice``:
+    ``auto`` (dense on a CUDA ``device`` up to ``DENSE_MAX_PARTICLES``, else sparse), ``sparse`` or
+    ``dense`` (on ``device``, whatever the size; what the tests compare on a CPU)."""
     if choice not in PHYSICS_SOLVERS:
         raise InputError(f"physics_solver={choice!r} is unknown: allowed {list(PHYSICS_SOLVERS)}")
     if choice == "dense":
         return device
-    if choice == "auto" and device.type == "cuda" and n_dof <= DENSE_DOF_LIMIT:
+    if choice == "auto" and device.type == "cuda" and n_particles <= DENSE_MAX_PARTICLES:
         return device
     return None
 
@@ -77,6 +81,18 @@ class DenseBatchSolver:
         return velocities
 
     def _solve(self, sims, problems, n_dof: int) -> list[np.ndarray]:
+        batch = len(sims)
+        what = f"the physics inputs' dense matrices ({batch} x {n_dof} rows, physics_solver=dense)"
+        if self.device.type == "cpu":
+            check_memory(3 * 8 * batch * n_dof * n_dof, what, "use physics_solver=sparse")
+        try:
+            return self._factorise_and_solve(sims, problems, n_dof)
+        except torch.OutOfMemoryError:
+            raise InputError(
+                f"{what} do not fit on {self.device}: use physics_solver=sparse (the CPU's sparse solver)"
+            ) from None
+
+    def _factorise_and_solve(self, sims, problems, n_dof: int) -> list[np.ndarray]:
         batch = len(sims)
         dense = torch.zeros((batch, n_dof * n_dof), dtype=torch.float64, device=self.device)
         for b, (sim, lp) in enumerate(zip(sims, problems)):

@@ -267,7 +267,7 @@ class Surrogate:
     its card; ``load_model`` makes one. ``device``: where the networks run (``resolve_device``);
     ``workers``: processes that build the snapshots' graphs and physics inputs (1: this one);
     ``physics_solver``: how those physics inputs' resistance problems are solved (``auto``: in dense
-    batches on a CUDA ``device`` up to ``DENSE_DOF_LIMIT`` rows, else the sparse solver on the CPU;
+    batches on a CUDA ``device`` up to ``DENSE_MAX_PARTICLES``, else the sparse solver on the CPU;
     ``sparse``; ``dense``: in dense batches on ``device``, a CPU too; rheograph.graphs.batched_solve)."""
 
     def __init__(
@@ -305,6 +305,11 @@ class Surrogate:
                 )
         self.card = read_card(self.paths)
         self.error_model = read_error_model(self.paths[0].parent)
+
+    def physics_device(self, snaps: Snapshots) -> torch.device | None:
+        """Where the physics inputs of ``snaps`` are solved in dense batches (None: the sparse solver on
+        the CPU, one snapshot after the other), as ``physics_solver`` says for their size."""
+        return physics_solver_device(self.physics_solver, self.device, snaps.n_particles)
 
     @property
     def physical_params(self) -> dict:
@@ -405,9 +410,7 @@ class Surrogate:
             solve_numerics=self.solve_numerics(snaps.phi, snaps.n_particles),
             training=False,
             workers=self.workers,
-            solve_device=physics_solver_device(
-                self.physics_solver, self.device, snaps.n_particles * (6 if snaps.dim == 3 else 3)
-            ),
+            solve_device=self.physics_device(snaps),
         )
         positions_only = not self.settings.stress_known
         if positions_only:
@@ -654,7 +657,7 @@ def main(argv=None) -> None:
         choices=PHYSICS_SOLVERS,
         default="auto",
         help="how the physics inputs' resistance problems are solved: auto (default: in dense batches on a "
-        "CUDA --device up to N = 4000 in 2D, 2000 in 3D; else sparse on the CPU), sparse, or dense (in "
+        "CUDA --device up to N = 2000; else sparse on the CPU), sparse, or dense (in "
         "batches on --device, a CPU too); the predictions differ by round-off",
     )
     args = ap.parse_args(argv)
