@@ -158,3 +158,20 @@ def test_dense_matrices_beyond_the_memory_granted_are_refused_in_one_line(monkey
     monkeypatch.setenv(MEMORY_LIMIT_ENV, "0.0001")  # 100 kB: less than one 180 x 180 problem's three copies
     with pytest.raises(InputError, match=r"dense matrices \(1 x 180 rows.*use physics_solver=sparse"):
         DenseBatchSolver(CPU)(sims, problems)
+
+
+def test_a_graph_cache_built_with_dense_batches_equals_the_sparse_one(tiny_files, tmp_path):
+    """The training set's cache with data.physics_solver=dense (on the CPU, as on a GPU trainer) holds
+    the sparse build's graphs, the one-solve eta_r to round-off; an unknown choice is refused in one line."""
+    from rheograph.graphs.dataset import GraphSettings, SnapshotGraphDataset
+    from rheograph.learn.datamodule import SnapshotDataModule
+
+    settings = GraphSettings(min_strain=0.05)
+    sparse = SnapshotGraphDataset(tiny_files, settings, tmp_path / "sparse")
+    dense = SnapshotGraphDataset(tiny_files, settings, tmp_path / "dense", physics=("dense", CPU))
+    assert len(dense) == len(sparse) > 20
+    np.testing.assert_allclose(dense.physics.numpy(), sparse.physics.numpy(), rtol=1e-9)
+    assert not np.array_equal(dense.physics.numpy(), sparse.physics.numpy())  # the other solver, truly
+    np.testing.assert_array_equal(dense.edge_attr.numpy(), sparse.edge_attr.numpy())
+    with pytest.raises(InputError, match=r"physics_solver='gpu' is unknown"):
+        SnapshotDataModule(tiny_files, physics_solver="gpu")

@@ -17,7 +17,7 @@ import torch
 from torch_geometric.data import Data, InMemoryDataset
 
 from rheograph.errors import InputError
-from rheograph.graphs.batched_solve import DenseBatchSolver
+from rheograph.graphs.batched_solve import DenseBatchSolver, physics_solver_device
 from rheograph.graphs.features import (
     COMPUTED_GRAPH_INPUTS,
     EDGE_FEATURES,
@@ -718,10 +718,20 @@ class SnapshotGraphDataset(InMemoryDataset):
     Cached in ``cache_dir/<hash>/processed``; the hash covers every graph setting and the files' paths,
     sizes and modification times, so changing either rebuilds the cache and nothing stale is reused.
     ``files.json`` beside it lists the files in run_id order, for a person looking into the cache.
+    ``physics``: (physics_solver, device) of a build (``rheograph.graphs.batched_solve``); the graphs of
+    either solver differ by round-off, so the key leaves it out.
     """
 
-    def __init__(self, files, settings: GraphSettings, cache_dir: str | Path, lfdem_params=None):
+    def __init__(
+        self,
+        files,
+        settings: GraphSettings,
+        cache_dir: str | Path,
+        lfdem_params=None,
+        physics: tuple[str, torch.device] = ("sparse", torch.device("cpu")),
+    ):
         self.files = sorted(str(f) for f in files)
+        self.solve_with = physics
         self.lfdem_params = None if lfdem_params is None else str(lfdem_params)
         if not self.files:
             raise InputError("no trajectory files given to the graph dataset")
@@ -839,8 +849,9 @@ class SnapshotGraphDataset(InMemoryDataset):
     def _file_graphs(self, run_id: int, path: str) -> list:
         """The graphs of one trajectory file (with its noisy copies when ``noise_copies`` is set)."""
         snaps = read_snapshots(path, self.lfdem_params)
+        solve_device = physics_solver_device(*self.solve_with, snaps.n_particles)
         if not self.settings.noise_copies:
-            return snapshot_graphs(snaps, self.settings, run_id)
+            return snapshot_graphs(snaps, self.settings, run_id, solve_device=solve_device)
         log.info("noisy copies of %s (%d/%d)", path, run_id + 1, len(self.files))
         graphs = []
         for copy_id in range(self.settings.noise_copies):
@@ -851,5 +862,5 @@ class SnapshotGraphDataset(InMemoryDataset):
                 self.settings.axial_noise_range,
                 self.settings.optical_axis,
             )
-            graphs.extend(snapshot_graphs(noisy, self.settings, run_id))
+            graphs.extend(snapshot_graphs(noisy, self.settings, run_id, solve_device=solve_device))
         return graphs

@@ -29,6 +29,7 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from rheograph.errors import InputError
+from rheograph.graphs.batched_solve import physics_solver_device
 from rheograph.graphs.dataset import SOLVE_NUMERICS, GraphSettings, NoisyGraphs, SnapshotGraphDataset
 from rheograph.io.configurations import PHYSICAL_PARAMS
 from rheograph.io.hdf5 import read_params
@@ -109,7 +110,9 @@ class SnapshotDataModule(L.LightningDataModule):
     ``phi`` / ``n_particles`` select the files of one area fraction / system size (null: all),
     ``train_fraction`` < 1 keeps that share of each training run's snapshots, ``device_resident`` keeps the
     graph sets collated on the trainer's device (module docstring; ``num_workers`` loader processes serve
-    only the per-batch path: false, or re-noised training graphs).  Configured by the ``data``
+    only the per-batch path: false, or re-noised training graphs), ``physics_solver`` how the cache's
+    physics inputs are solved (``rheograph.graphs.batched_solve``; ``auto``: in dense batches on the
+    trainer's GPU, sparse on a CPU).  Configured by the ``data``
     group (``conf/data/``); ``setup`` makes the split and fits the standardisation on the training part."""
 
     def __init__(
@@ -128,8 +131,10 @@ class SnapshotDataModule(L.LightningDataModule):
         train_fraction: float = 1.0,
         lfdem_params: str | None = None,
         device_resident: bool = True,
+        physics_solver: str = "auto",
     ):
         super().__init__()
+        physics_solver_device(physics_solver, torch.device("cpu"), 0)  # an unknown choice refused here
         if split not in SPLITS:
             raise InputError(f"data.split={split!r} is invalid: allowed {SPLITS}")
         check_num_folds(num_folds)
@@ -147,6 +152,7 @@ class SnapshotDataModule(L.LightningDataModule):
         self.train_fraction = train_fraction
         self.lfdem_params = lfdem_params
         self.device_resident = device_resident
+        self.physics_solver = physics_solver
         self.device_sets = {}  # {(stage, device): DeviceGraphSet}, built on first use
         self.dataset = None
         self.run_params = None  # {run_id: parameter mapping}, for graphs rebuilt from noisy positions
@@ -179,7 +185,10 @@ class SnapshotDataModule(L.LightningDataModule):
         if self.dataset is not None:
             return
         self.files = self.selected_files()
-        dataset = SnapshotGraphDataset(self.files, self.graph, self.cache_dir, self.lfdem_params)
+        device = self.trainer.strategy.root_device if self.trainer is not None else torch.device("cpu")
+        dataset = SnapshotGraphDataset(
+            self.files, self.graph, self.cache_dir, self.lfdem_params, (self.physics_solver, device)
+        )
         index = np.arange(len(dataset))
         self.dataset = dataset
         runs = dataset.run_id.numpy()
