@@ -223,3 +223,28 @@ def test_predict_py_runs_on_the_cpu_device(tmp_path, capsys):
     assert out.exists() and "snapshots" in capsys.readouterr().out
     with pytest.raises(InputError, match="--workers 0"):
         main(["--models", "N400_phi0.76", "--input", str(path), "--out", str(out), "--workers", "0"])
+
+
+def test_baselines_fitted_alongside_a_gpu_fold_equal_those_fitted_after(tiny_files, tmp_path, monkeypatch):
+    """On a GPU a fold's descriptor baselines are fitted in a thread while the network trains; forced
+    here on the CPU, they run outside the main thread and give the baselines of the sequential path."""
+    import threading
+
+    import rheograph.learn.train as train
+
+    after = train.read_fold_predictions(train_tiny_fold(tiny_files, tmp_path / "after"), 0)["baselines"]
+    threads = []
+    original = train.baseline_predictions
+
+    def recorded(*args):
+        threads.append(threading.current_thread() is threading.main_thread())
+        return original(*args)
+
+    monkeypatch.setattr(train, "baselines_alongside", lambda trainer: True)
+    monkeypatch.setattr(train, "baseline_predictions", recorded)
+    run = train_tiny_fold(tiny_files, tmp_path / "alongside")
+    assert threads == [False]
+    alongside = train.read_fold_predictions(run, 0)["baselines"]
+    assert set(alongside) == set(after) and "descriptors" in after
+    for name, values in after.items():
+        np.testing.assert_array_equal(alongside[name], values)

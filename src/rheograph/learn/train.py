@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import logging.handlers
 import os
 import shutil
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -175,12 +177,28 @@ def train_fold(
                 break
     if resume_point.exists():
         log.info("fold %d: resuming from its last finished epoch (%s)", k, resume_point)
-    trainer.fit(
-        module,
-        datamodule=dm,
-        ckpt_path=str(resume_point) if resume_point.exists() else None,
-        weights_only=True,
+    fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
+    fit_baselines = functools.partial(
+        baseline_predictions,
+        dataset_arrays(dm.dataset, fitted),
+        dataset_arrays(dm.dataset, dm.test_idx),
+        settings.targets,
     )
+    # while a GPU trains the network the CPU idles: the descriptor baselines (two gradient-boosted tree
+    # models, ~6 s a demo fold, longer than the fold's training on a GPU) are fitted alongside, in a
+    # thread (their fits run in compiled code, outside the interpreter lock); on a CPU, after it
+    alongside = ThreadPoolExecutor(1) if baselines_alongside(trainer) else None
+    baselines_future = alongside.submit(fit_baselines) if alongside else None
+    try:
+        trainer.fit(
+            module,
+            datamodule=dm,
+            ckpt_path=str(resume_point) if resume_point.exists() else None,
+            weights_only=True,
+        )
+    finally:
+        if alongside:
+            alongside.shutdown(wait=True)
     ckpt = next((c for c in callbacks if hasattr(c, "best_model_path")), None)
     if ckpt is not None and ckpt.best_model_path:
         state = torch.load(ckpt.best_model_path, map_location="cpu", weights_only=True)["state_dict"]
@@ -194,12 +212,7 @@ def train_fold(
         raise FloatingPointError(f"fold {k}: validation loss is {best_val} (diverged)")
     test_metrics = trainer.test(module, datamodule=dm, verbose=False)[0]
     pred, true, meta = predict_dataset(module, dm.graphs(dm.test_idx))
-    fitted = np.r_[dm.train_idx, dm.val_idx]  # baselines have no early stopping: fit on both
-    baselines = baseline_predictions(
-        dataset_arrays(dm.dataset, fitted),
-        dataset_arrays(dm.dataset, dm.test_idx),
-        settings.targets,
-    )
+    baselines = baselines_future.result() if baselines_future else fit_baselines()
     prediction = dict(fold=k, pred=pred, true=true, baselines=baselines, **meta)
     save_bundle(run_dir / f"fold{k}.pt", module, settings, k, dm.split, dm.domain)
     result = {"fold": k, "val/loss": best_val, **{k2: float(v) for k2, v in test_metrics.items()}}
@@ -219,6 +232,11 @@ def train_fold(
             {"hp/" + key.replace("/", "_"): v for key, v in result.items() if key != "fold"},
         )
     return result, prediction
+
+
+def baselines_alongside(trainer) -> bool:
+    """Whether a fold's baselines are fitted while ``trainer`` trains its network: on a GPU."""
+    return trainer.strategy.root_device.type == "cuda"
 
 
 class _RelayToLoggers(logging.Handler):
