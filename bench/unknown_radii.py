@@ -2,6 +2,10 @@
 
     python -m bench.unknown_radii 'data/polydisperse/multirun/*/trajectory.h5' \
         --lookup 'data/paper/multirun/N400_phi0.76_*/trajectory.h5'
+    python -m bench.unknown_radii 'data/polydisperse_3d/multirun/*/trajectory.h5' \
+        --models N500_phi0.56_3d N500_phi0.56_3d_confocal --section unknown_radii_3d \
+        --lookup 'data/flow_curves_3d/multirun/N500_phi0.56_s2_*/trajectory.h5' \
+        'data/flow_curves_3d/multirun/N500_phi0.56_s20_*/trajectory.h5'
 
 Real particles spread in size by several per cent and a microscope does not measure each radius; the
 shipped models were trained on two exact radii (1 and 1.4).  The runs scored here were simulated with
@@ -17,8 +21,9 @@ snapshots are given to the models with what an experiment knows instead of the t
 * ``radii estimated, mean``: the same, the radii the mean of the estimates over the run's kept snapshots.
 
 The exact models read the gaps the nominal radii make (overlaps of order p a between touching
-particles); the imaging models given nominal radii are told a position precision ``--declared-noise``
-[a] and relax the configuration before reading it.  Given estimated radii, every model is told the
+particles); the imaging models (those told a position precision: 2D imaging, 3D confocal) given nominal
+radii are told a precision ``--declared-noise`` [a] (in 3D along the optical axis too) and, where they
+relax, relax the configuration before reading it.  Given estimated radii, every model is told the
 precision ``predict_with_estimated_radii`` declares: the positions are the simulator's, exact, so it is
 the radii's uncertainty alone (the estimates' scatter over the run's kept snapshots), shown in the table.
 With the true radii (or estimated ones) the models read each particle's species from its size and
@@ -94,6 +99,7 @@ def main(argv=None) -> int:
         "--radii", nargs="+", choices=MODES, default=list(MODES), help="what the models are given"
     )
     ap.add_argument("--section", default="unknown_radii", help="the marked section of docs/imaging.md")
+    ap.add_argument("--page", default="imaging.md", help="the section's page under docs/")
     ap.add_argument("--title", default="Surrogates on polydisperse suspensions whose radii are unknown")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
@@ -104,22 +110,29 @@ def main(argv=None) -> int:
     models = {name: load_model(name) for name in args.models}
 
     by_spread: dict = {}
+    systems = set()
     for path in files:
         params = read_run_info(path)["params"]
         if params.get("radii") != "polydisperse":
             sys.exit(f"unknown_radii: {path} is not a run of sim.radii=polydisperse")
-        # the simulator's species: the first n_small particles are the small ones, equal areas
-        n_large = round(params["n_particles"] / (1.0 + params["size_ratio"] ** 2))
+        dim = int(params.get("dim", 2))
+        systems.add((dim, params["n_particles"], params["phi"]))
+        # the simulator's species: the first n_small particles are the small ones, equal areas (volumes)
+        n_large = round(params["n_particles"] / (1.0 + params["size_ratio"] ** dim))
         runs = by_spread.setdefault(float(params["polydispersity"]), [])
         runs.append((read_snapshots(path), params["n_particles"] - n_large))
 
+    if len(systems) > 1:
+        sys.exit(f"unknown_radii: the runs are of several systems (dimension, N, φ): {sorted(systems)}")
+    ((dim, n_particles, phi),) = systems
     record: dict = {"command": command_line("unknown_radii", argv), "spreads": {}}
     lines = [
         f"### {args.title}",
         "",
-        f"N = 400, φ = 0.76; snapshots at strain ≥ {args.min_strain:g} of runs with each species' radii "
-        "spread Gaussian (relative spread p, truncated at 2p); R² log η_r / log Π / Z_μ over all runs of "
-        f"one spread; imaging models given nominal radii told ε = {args.declared_noise:g} a, every model "
+        f"{'3D, ' if dim == 3 else ''}N = {n_particles}, φ = {phi:g}; snapshots at strain ≥ "
+        f"{args.min_strain:g} of runs with each species' radii spread Gaussian (relative spread p, truncated "
+        f"at 2p); R² log η_r / log Π / Z_μ over all runs of one spread; imaging models given nominal radii "
+        f"told ε = {args.declared_noise:g} a, every model "
         "given estimated radii told their uncertainty (their scatter over the run's snapshots; the positions "
         "are exact); in domain: the share of snapshots the model does not flag.\n",
     ]
@@ -140,7 +153,7 @@ def main(argv=None) -> int:
                         # the simulator's positions are exact; estimated radii add their own uncertainty
                         if how in ESTIMATED:
                             given.position_noise = 0.0
-                        elif "imaging" in name:
+                        elif "position_noise" in model.settings.graph_inputs:
                             given.position_noise = args.declared_noise
                     try:
                         pred, sim, share, eps = predict(model, given, keep, how)
@@ -192,7 +205,7 @@ def main(argv=None) -> int:
         record["spreads"][str(spread)] = rows
     header = ["p", "radii given", "model", "R² log η_r", "R² log Π", "R² Z_μ", "in domain"]
     lines += [table(header, body), f"\nCommand: `{record['command']}`"]
-    publish(args.section, lines, not args.no_write, page="imaging.md", record=record)
+    publish(args.section, lines, not args.no_write, page=args.page, record=record)
     return 0
 
 

@@ -175,3 +175,39 @@ def test_a_graph_cache_built_with_dense_batches_equals_the_sparse_one(tiny_files
     np.testing.assert_array_equal(dense.edge_attr.numpy(), sparse.edge_attr.numpy())
     with pytest.raises(InputError, match=r"physics_solver='gpu' is unknown"):
         SnapshotDataModule(tiny_files, physics_solver="gpu")
+
+
+def test_snapshots_stepped_together_in_chunks_give_the_same_graphs(monkeypatch):
+    """Three snapshots in chunks of two (two batches) give the graphs of one batch, bit for bit, and
+    the one-solve of the sparse path to round-off; their simulations analyse no sparse pattern."""
+    import rheograph.graphs.dataset as dataset
+    from rheograph.learn.predict import load_model
+    from rheograph.sim.solver import CholmodSolver
+
+    analysed = []
+    original = CholmodSolver.analyze
+    monkeypatch.setattr(CholmodSolver, "analyze", lambda self, *a: analysed.append(1) or original(self, *a))
+    snaps = few_snapshots(3)
+    model = load_model("N400_phi0.76")
+    numerics = model.solve_numerics(snaps.phi, snaps.n_particles)
+    whole = dataset.snapshot_graphs(snaps, model.settings, 0, numerics, training=False, solve_device=CPU)
+    assert analysed == []
+    monkeypatch.setattr(dataset, "SOLVED_TOGETHER", 2)
+    chunked = dataset.snapshot_graphs(snaps, model.settings, 0, numerics, training=False, solve_device=CPU)
+    sparse = dataset.snapshot_graphs(snaps, model.settings, 0, numerics, training=False)
+    assert len(analysed) == 3  # the sparse path analyses each snapshot's pattern once
+    for a, b, c in zip(chunked, whole, sparse):
+        np.testing.assert_array_equal(a.physics.numpy(), b.physics.numpy())
+        np.testing.assert_allclose(a.physics.numpy(), c.physics.numpy(), rtol=1e-9)
+
+
+def test_a_deferred_analysis_solves_as_the_solver_it_defers():
+    """A simulation with DeferredAnalysis takes the steps of one with its solver, bit for bit."""
+    from rheograph.sim.solver import DeferredAnalysis, make_solver
+
+    params = SimParams(n_particles=60, phi=0.80, stress=50.0, seed=60, disp_max=5e-3)
+    deferred = Simulation(params, solver=DeferredAnalysis(make_solver("auto")))
+    direct = Simulation(params)
+    for _ in range(20):
+        assert deferred.step().shear_rate == direct.step().shear_rate
+    np.testing.assert_array_equal(deferred.state.positions, direct.state.positions)

@@ -55,12 +55,16 @@ from rheograph.io.hdf5 import SCHEMA_VERSION
 from rheograph.io.snapshots import read_snapshots
 from rheograph.resources import check_memory, graph_bytes
 from rheograph.sim.integrator import particle_pressure, solve_configurations
+from rheograph.sim.solver import DeferredAnalysis, make_solver
 
 TARGETS = ("viscosity", "pressure", "z_mu")
 # the step settings of the one-solve input (rheograph.graphs.features.solve_viscosity): numerics of the
 # model, recorded in its bundle, not of the snapshot
 SOLVE_NUMERICS = ("disp_max", "dt_max", "lagged_step_control")
 AXES = ("x", "y", "z")  # flow, gradient, vorticity
+# snapshots whose simulations are stepped together in dense batches (``_solved_together``): batches of
+# this many problems for the device, and the memory their simulations hold at once bounded
+SOLVED_TOGETHER = 64
 log = logging.getLogger("rheograph.graphs")
 
 
@@ -394,7 +398,10 @@ def _graphs_of_snapshots(shared: tuple, jobs: list[dict]) -> list[Data]:
     its one solve, edges and inputs."""
     radii, edges, solve_params, settings, phi, run_id, solve_device = shared
     if solve_device is not None:
-        solved = _solved_together(jobs, radii, edges, solve_params, settings, solve_device)
+        solved = []
+        for start in range(0, len(jobs), SOLVED_TOGETHER):
+            chunk = jobs[start : start + SOLVED_TOGETHER]
+            solved += _solved_together(chunk, radii, edges, solve_params, settings, solve_device)
     else:
         solved = [_solved_alone(job, radii, edges, solve_params, settings) for job in jobs]
     graphs = []
@@ -445,9 +452,11 @@ def _solved_together(jobs: list[dict], radii, edges, solve_params, settings, dev
     solve_batch = DenseBatchSolver(device)
 
     def simulation(positions, offset):
+        # the sparse solver analyses a pattern only where a problem falls back to it
+        solver = DeferredAnalysis(make_solver("auto"))
         if len(edges) == 3:
-            return snapshot_simulation3d(positions, radii, (*edges, offset), solve_params)
-        return snapshot_simulation(positions, radii, (*edges, offset), solve_params)
+            return snapshot_simulation3d(positions, radii, (*edges, offset), solve_params, solver)
+        return snapshot_simulation(positions, radii, (*edges, offset), solve_params, solver)
 
     states = [(job["positions"], job["le_offset"], np.nan, None) for job in jobs]
     if settings.relax_strain:

@@ -380,9 +380,10 @@ def solve_viscosity(positions, radii, lx, ly, le_offset, params: dict, passes: i
     return one_solve_viscosity(sim_params, sim.solve_configuration(passes))
 
 
-def snapshot_simulation(positions, radii, box, params: dict) -> tuple[SimParams, Simulation]:
+def snapshot_simulation(positions, radii, box, params: dict, solver="auto") -> tuple[SimParams, Simulation]:
     """A stress-controlled implicit ``Simulation`` started from one snapshot (no contact history):
-    positions (N, 2) [a], box = (lx, ly, le_offset) [a], ``params`` the run's parameter mapping."""
+    positions (N, 2) [a], box = (lx, ly, le_offset) [a], ``params`` the run's parameter mapping,
+    ``solver`` its sparse solver (``rheograph.sim.solver``)."""
     lx, ly, le_offset = box
     sim_params = SimParams.from_mapping({**params, "integrator": "implicit", "control": "stress"})
     snapshot = SimState(
@@ -392,7 +393,7 @@ def snapshot_simulation(positions, radii, box, params: dict) -> tuple[SimParams,
         ly=ly,
         le_offset=le_offset,
     )
-    return sim_params, Simulation(sim_params, snapshot)
+    return sim_params, Simulation(sim_params, snapshot, solver)
 
 
 def one_solve_viscosity(sim_params, result) -> float:

@@ -114,8 +114,11 @@ def snapshot_edges3d(positions, radii, box3, cutoff, params, contacts=None):
     return edge_index, feats, p
 
 
-def snapshot_simulation3d(positions, radii, box3, params: dict) -> tuple[SimParams3D, Simulation3D]:
-    """A stress-controlled implicit ``Simulation3D`` started from one snapshot (no contact history)."""
+def snapshot_simulation3d(
+    positions, radii, box3, params: dict, solver="auto"
+) -> tuple[SimParams3D, Simulation3D]:
+    """A stress-controlled implicit ``Simulation3D`` started from one snapshot (no contact history),
+    ``solver`` its sparse solver (``rheograph.sim.solver``)."""
     lx, ly, lz, le_offset = box3
     mapping = {k: v for k, v in params.items() if k != "dim"}
     sim_params = SimParams3D.from_mapping({**mapping, "integrator": "implicit", "control": "stress"})
@@ -127,7 +130,7 @@ def snapshot_simulation3d(positions, radii, box3, params: dict) -> tuple[SimPara
         lz=lz,
         le_offset=le_offset,
     )
-    return sim_params, Simulation3D(sim_params, state)
+    return sim_params, Simulation3D(sim_params, state, solver)
 
 
 def solve_viscosity3d(positions, radii, box3, params: dict, passes: int = 2) -> float:

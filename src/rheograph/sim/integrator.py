@@ -317,7 +317,8 @@ class SimulationBase(ABC):
 
     ``velocity`` holds the last step's non-affine velocities (N DOF,); ``stress_factor`` converts
     stresslet sums to sigma0 (6 pi / box area or volume); ``drag`` is the one-body Stokes drag per degree
-    of freedom [6 pi eta0].
+    of freedom [6 pi eta0].  ``solver``: the sparse solver's backend name or the solver itself
+    (``rheograph.sim.solver``).
     """
 
     # a dimension's class attributes: DIM (space dimension), DOF (degrees of freedom per particle, the
@@ -329,7 +330,7 @@ class SimulationBase(ABC):
     DOF: int
     SOLVENT_UNIT: np.ndarray
 
-    def __init__(self, params: SimParams, state: SimState | None = None, solver: str = "auto"):
+    def __init__(self, params: SimParams, state: SimState | None = None, solver="auto"):
         self.params = params
         # refused before the initial configuration or any matrix is allocated
         check_simulation_memory(params.n_particles, dim=self.DIM)

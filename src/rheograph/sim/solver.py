@@ -111,6 +111,29 @@ class CholmodSolver(SparseSPDSolver):
         return self._factor(rhs)
 
 
+class DeferredAnalysis(SparseSPDSolver):
+    """``solver`` whose symbolic analysis waits for the first factorisation on its pattern: for a
+    simulation whose problems are mostly solved elsewhere (in dense batches on a GPU,
+    ``rheograph.graphs.batched_solve``), which then pays for the analysis only where it falls back."""
+
+    def __init__(self, solver: SparseSPDSolver) -> None:
+        self.solver = solver
+        self.name = solver.name
+        self._pattern = None
+
+    def analyze(self, indptr, indices, ndof):
+        self._pattern = (indptr, indices, ndof)
+
+    def factorize(self, data):
+        if self._pattern is not None:
+            self.solver.analyze(*self._pattern)
+            self._pattern = None
+        self.solver.factorize(data)
+
+    def solve(self, rhs):
+        return self.solver.solve(rhs)
+
+
 SOLVERS = {"cholmod": CholmodSolver, "qdldl": QDLDLSolver}
 
 
@@ -137,5 +160,8 @@ def resolve_solver_name(name: str) -> str:
     return name
 
 
-def make_solver(name: str) -> SparseSPDSolver:
+def make_solver(name: str | SparseSPDSolver) -> SparseSPDSolver:
+    """The backend ``name`` stands for (``resolve_solver_name``), or ``name`` itself when it is one."""
+    if isinstance(name, SparseSPDSolver):
+        return name
     return SOLVERS[resolve_solver_name(name)]()
