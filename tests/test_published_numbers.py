@@ -34,13 +34,17 @@ def _shipped(name: str) -> tuple[str, str]:
 
 
 def _shipped_folds(exact: bool) -> list[tuple[str, int]]:
-    """(model, fold) of every fold of the shipped exact-position (or imaging) models."""
+    """(model, fold) of every fold of the shipped exact-position (or imaging: trained on noisy positions,
+    2D imaging and 3D confocal) models, as their cards say."""
     from rheograph.learn.registry import MODELS_DIR, list_models
+
+    def imaging(name: str) -> bool:
+        return json.loads((MODELS_DIR / name / "card.json").read_text())["position_noise"] != 0.0
 
     return [
         (name, int(path.stem.removeprefix("fold")))
         for name in list_models()
-        if name.endswith("_imaging") != exact
+        if imaging(name) != exact
         for path in sorted((MODELS_DIR / name).glob("fold*.pt"))
     ]
 
@@ -87,12 +91,14 @@ def test_positions_only_bundle_reproduces_its_committed_test_predictions():
         pytest.param("N400_phi0.70_imaging", marks=pytest.mark.slow),
         pytest.param("N400_phi0.76_imaging", marks=pytest.mark.slow),
         pytest.param("N400_phi0.80_imaging", marks=pytest.mark.slow),
+        pytest.param("N500_phi0.56_3d_confocal", marks=pytest.mark.slow),  # 3D graphs of 4 noisy copies
         "pooled_N400_imaging",
     ],
 )
 def test_shipped_imaging_model_reproduces_its_committed_noisy_test_predictions(name):
     """The imaging models' published scores are guarded the same way: the seeded noisy copies of a
-    test trajectory, relaxed and read as in training, give the committed predictions."""
+    test trajectory (in 3D with the confocal axial noise), relaxed where the model relaxes and read as in
+    training, give the committed predictions."""
     from rheograph.graphs.dataset import noisy_copy, snapshot_graphs
     from rheograph.io.snapshots import read_snapshots
     from rheograph.learn.bundle import load_bundle, predict_dataset
@@ -103,12 +109,18 @@ def test_shipped_imaging_model_reproduces_its_committed_noisy_test_predictions(n
     saved = np.load(run_dir / "fold0_predictions.npz")
     run = int(saved["run_id"][0])
     module, settings, _ = load_bundle(bundle)
-    assert settings.noise_copies and settings.relax_strain  # noisy copies, relaxed before reading
+    assert settings.noise_copies  # noisy copies (the 2D models relax them before reading)
     snaps = read_snapshots(split_files(split, ROOT)[run])
     graphs = [
         g
         for copy_id in range(settings.noise_copies)  # seeded per (trajectory, copy), as the cache builds them
-        for g in snapshot_graphs(noisy_copy(snaps, settings.noise_range, [run, copy_id]), settings, run)
+        for g in snapshot_graphs(
+            noisy_copy(
+                snaps, settings.noise_range, [run, copy_id], settings.axial_noise_range, settings.optical_axis
+            ),
+            settings,
+            run,
+        )
     ]
     pred, true, _ = predict_dataset(module, graphs)
     mine = saved["run_id"] == run
