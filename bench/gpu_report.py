@@ -139,20 +139,15 @@ def render(data: dict) -> str:
     if "c" in parts:
         out += ["All folds end to end through `train.py` (graph cache built):", ""]
         out += end_to_end_lines(parts["c"]) + [""]
-    if "d" in parts:
-        out += [
-            "Prediction with the shipped models (five fold models each; physics inputs: graphs with one "
-            "resistance solve per snapshot, on the CPU):",
-            "",
-        ]
-        out += prediction_table(parts["d"]) + [""]
-    if "f" in parts:
-        out += [
-            "One resistance problem solved (factorisation and two right-hand sides): the sparse Cholesky on "
-            "one CPU core against the dense batched Cholesky (a batch's time over its problems):",
-            "",
-        ]
-        out += crossover_table(parts["f"]) + [""]
+    captions = {
+        "d": "Prediction with the shipped models (five fold models each; physics inputs: graphs with one "
+        "resistance solve per snapshot, solved as the column says):",
+        "f": "One resistance problem solved (factorisation and two right-hand sides): the sparse Cholesky on "
+        "one CPU core against the dense batched Cholesky (a batch's time over its problems):",
+    }
+    for part, draw in (("d", prediction_table), ("f", crossover_table)):
+        if part in parts:
+            out += [captions[part], ""] + draw(parts[part]) + [""]
     return "\n".join(out)
 
 
