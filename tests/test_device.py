@@ -225,6 +225,7 @@ def test_predict_py_runs_on_the_cpu_device(tmp_path, capsys):
         main(["--models", "N400_phi0.76", "--input", str(path), "--out", str(out), "--workers", "0"])
 
 
+@pytest.mark.slow  # 10 s: two tiny training runs
 def test_baselines_fitted_alongside_a_gpu_fold_equal_those_fitted_after(tiny_files, tmp_path, monkeypatch):
     """On a GPU a fold's descriptor baselines are fitted in a thread while the network trains; forced
     here on the CPU, they run outside the main thread and give the baselines of the sequential path."""
