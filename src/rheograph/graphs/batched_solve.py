@@ -27,7 +27,7 @@ from rheograph.resources import check_memory
 
 # particles up to which a GPU solves the problems as dense matrices (3D: 12 000 rows, 1.15 GB each in
 # float64).  Not yet measured on a GPU: an estimate from the sparse solver's times on one CPU core (2D
-# N = 1000 8 ms, 3D N = 500 45 ms; about 16 and 360 ms at N = 2000) against a dense Cholesky of n^3 / 3
+# N = 1000 8 ms, 3D N = 500 45 ms; about 16 and 380 ms at N = 2000) against a dense Cholesky of n^3 / 3
 # at ~10 TFLOP/s in float64 (2D ~7 ms, 3D ~60 ms at N = 2000); part f of bench/gpu.py measures where the
 # two cross
 DENSE_MAX_PARTICLES = 2000
