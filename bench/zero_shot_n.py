@@ -5,13 +5,16 @@ larger (or smaller) systems, which they never saw by construction.
     python -m bench.zero_shot_n data/paper/multirun/N2000_phi0.76_*/trajectory.h5 \\
         --models N400_phi0.76_imaging --noise 0 0.01 0.03 --every 4 \\
         --page validation/position_noise.md --section zero_shot_n_noise --title '...'
+    python -m bench.zero_shot_n data/large_n_3d/multirun --models pooled_N500_3d \\
+        --lookup-from data/flow_curves_3d/multirun --page validation/surrogate_3d.md --section zero_shot_3d
 
 Every snapshot with strain >= 1 of every trajectory under the directories (grouped by N and φ), each
 model whose area fractions cover the group: its ensemble prediction (the models flag N as outside their
 domain: that is the point), against the simulator's own targets: R² of log η_r, log Π and Z_μ per (N, φ,
 model), pooled over the stresses, with the within-state fluctuation correlation of η_r.  With ``--noise``
 the positions carry Gaussian noise of each ε (declared to the model, as for an imaging model), beside the
-lookup of the other seeds' mean at the same state point.  Results replace the marked section
+lookup of the other seeds' mean at the same state point (or, with ``--lookup-from``, of other runs' mean at
+the same (φ, σ): the smaller system's set).  Results replace the marked section
 (``--section``) of docs/<``--page``> (default jamming.md) unless ``--no-write``; ``--per-snapshot`` also
 prints every scored snapshot's prediction/target ratios.
 """
@@ -82,25 +85,65 @@ def other_seeds_mean(members) -> list[np.ndarray | None]:
     return out
 
 
+def reference_mean(members, references) -> tuple[list[np.ndarray | None], str]:
+    """Per trajectory of ``members``, the lookup from other runs (``references``: (snapshots, kept
+    indices) pairs, e.g. a smaller system's set): the geometric means of η_r and Π and the mean of Z_μ
+    over the references' snapshots at its (φ, σ), (K, 3) for its K snapshots (None where no reference
+    run has its state point); with the row's label."""
+    from rheograph.naming import state_point_key
+
+    def key(s):
+        return state_point_key(np.array([s.phi]), np.array([s.stress]))[0]
+
+    pooled: dict = {}
+    for s, k in references:
+        pooled.setdefault(key(s), []).append(s.targets[k])
+    sizes = sorted({s.n_particles for s, _ in references})
+    out = [
+        np.repeat(lookup_mean(pooled[key(s)])[None], keep.size, axis=0) if key(s) in pooled else None
+        for s, keep in members
+    ]
+    return out, f"lookup: mean of the N = {', '.join(map(str, sizes))} runs at (φ, σ)"
+
+
+def _flowing(paths, min_strain: float, every: int = 1) -> list:
+    """(snapshots, indices) per trajectory of ``paths``: every ``every``-th flowing snapshot with strain
+    >= ``min_strain`` (trajectories without one are left out)."""
+    from rheograph.io.snapshots import read_snapshots
+
+    out = []
+    for path in paths:
+        snaps = read_snapshots(path)
+        keep = np.flatnonzero((np.nan_to_num(snaps.strain, nan=-1) >= min_strain) & ~snaps.jammed)[::every]
+        if keep.size:
+            out.append((snaps, keep))
+    return out
+
+
 def score(
-    models, paths, min_strain: float, noises=(0.0,), every: int = 1, seed: int = 0, per_snapshot=None
+    models,
+    paths,
+    min_strain: float,
+    noises=(0.0,),
+    every: int = 1,
+    seed: int = 0,
+    per_snapshot=None,
+    lookup_paths=None,
 ) -> list[dict]:
     """Rows of metrics per (N, φ, model or lookup, ε): every ``every``-th flowing snapshot with strain >=
-    ``min_strain``, noise ``ε`` [a] drawn once per (ε, trajectory) from ``seed``.  A list given as
-    ``per_snapshot`` receives one dict per (model, ε, snapshot the row scores): its run, stress, strain
-    and η_r, and the prediction's ratios (η_r, Π) and difference (Z_μ) — what an R² over a few snapshots
-    of one state point hides."""
-    from rheograph.io.snapshots import read_snapshots
+    ``min_strain``, noise ``ε`` [a] drawn once per (ε, trajectory) from ``seed``.  The lookup is the
+    other seeds' mean at the same (N, φ, σ), or with ``lookup_paths`` the mean of those trajectories'
+    flowing snapshots at the same (φ, σ).  A list given as ``per_snapshot`` receives one dict per
+    (model, ε, snapshot the row scores): its run, stress, strain and η_r, and the prediction's ratios
+    (η_r, Π) and difference (Z_μ) — what an R² over a few snapshots of one state point hides."""
     from rheograph.learn.module import fold_metrics
     from rheograph.learn.predict import load_model
     from rheograph.naming import state_point_key
 
     groups: dict = {}
-    for path in paths:
-        snaps = read_snapshots(path)
-        keep = np.flatnonzero((np.nan_to_num(snaps.strain, nan=-1) >= min_strain) & ~snaps.jammed)[::every]
-        if keep.size:
-            groups.setdefault((snaps.n_particles, round(snaps.phi, 6)), []).append((snaps, keep))
+    for snaps, keep in _flowing(paths, min_strain, every):
+        groups.setdefault((snaps.n_particles, round(snaps.phi, 6)), []).append((snaps, keep))
+    references = _flowing(lookup_paths, min_strain) if lookup_paths else None
     rows = []
     for (n, phi), members in sorted(groups.items()):
         true = np.concatenate([s.targets[k] for s, k in members])
@@ -108,7 +151,10 @@ def score(
             [state_point_key(np.full(k.size, s.phi), np.full(k.size, s.stress)) for s, k in members]
         )
         key_stress = np.concatenate([np.full(k.size, s.stress) for s, k in members])
-        lookups = other_seeds_mean(members)
+        if references is None:
+            lookups, lookup_label = other_seeds_mean(members), "lookup: other seeds' mean at (φ, σ)"
+        else:
+            lookups, lookup_label = reference_mean(members, references)
         # where a lookup exists, every row is scored on the snapshots it covers (state points with
         # another seed): R² over different snapshots would not compare
         have = np.concatenate([np.full(k.size, x is not None) for (_, k), x in zip(members, lookups)])
@@ -125,7 +171,7 @@ def score(
             rows.append(
                 {
                     **common,
-                    "model": "lookup: other seeds' mean at (φ, σ)",
+                    "model": lookup_label,
                     "zero_shot": None,
                     "eps": None,
                     **fold_metrics(pred, true[have], key[have]),
@@ -201,6 +247,13 @@ def main(argv=None) -> int:
     ap.add_argument("--min-strain", type=float, default=1.0)
     ap.add_argument("--noise", type=float, nargs="+", default=[0.0], help="position noise ε [a], declared")
     ap.add_argument("--every", type=int, default=1, help="score every n-th snapshot")
+    ap.add_argument(
+        "--lookup-from",
+        nargs="+",
+        default=None,
+        help="trajectories (files, globs, directories) whose mean at each (φ, σ) is the lookup row, "
+        "e.g. the smaller system's set (default: the other seeds at the same N)",
+    )
     ap.add_argument("--seed", type=int, default=0, help="of the noise draws")
     ap.add_argument("--page", default=None, help="the docs page holding the section (default: its record's)")
     ap.add_argument("--section", default="zero_shot_n")
@@ -214,16 +267,27 @@ def main(argv=None) -> int:
         ap.error("--every must be >= 1 and each --noise in [0, 1) (units of a)")
     paths = trajectory_paths(args.sources, ap)
     snapshots = [] if args.per_snapshot else None
-    rows = score(args.models, paths, args.min_strain, args.noise, args.every, args.seed, snapshots)
+    lookup_paths = trajectory_paths(args.lookup_from, ap) if args.lookup_from else None
+    rows = score(
+        args.models, paths, args.min_strain, args.noise, args.every, args.seed, snapshots, lookup_paths
+    )
     thinned = f" (every {args.every}th)" if args.every > 1 else ""
     lines = [
         f"Each shipped model on the flowing snapshots{thinned} with strain ≥ {args.min_strain:g} of the "
         "runs at each (N, φ), pooled over the stresses; zero-shot where the model was trained at another "
         "N (a model at its own N has seen most of these trajectories: a reference, not a test).  ε: "
         "Gaussian noise per coordinate added to the positions and declared to the model (units of a).  "
-        "The lookup is the mean of the other seeds' runs at the same (N, φ, σ): what a user who had "
-        "simulated that state point would predict without reading a snapshot (absent where a state point "
-        "has one run; where it exists, every row of that (N, φ) is scored on the snapshots it covers).\n",
+        + (
+            "The lookup is the mean of the other seeds' runs at the same (N, φ, σ): what a user who had "
+            "simulated that state point would predict without reading a snapshot (absent where a state "
+            "point has one run; "
+            if lookup_paths is None
+            else "The lookup is the mean of the smaller system's runs at the same (φ, σ) (strain ≥ "
+            f"{args.min_strain:g}): what a user who had simulated that state point at the size the models "
+            "were trained on would predict without reading a snapshot (absent where those runs lack the "
+            "state point; "
+        )
+        + "where it exists, every row of that (N, φ) is scored on the snapshots it covers).\n",
     ]
     header = ["N", "φ", "model", "zero-shot", "ε [a]", "snapshots", "stresses", "R² log η_r", "R² log Π"]
     header += ["R² Z_μ", "fluct. η_r"]
