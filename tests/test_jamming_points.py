@@ -180,6 +180,32 @@ def test_bootstrap_interval_brackets_the_true_jamming_point_of_noisy_seeds():
     assert {r["method"] for r in rows} == {"divergence, beta = 2", "divergence, beta fitted"}
 
 
+def test_one_run_per_state_point_gets_an_interval_from_its_block_error_only_when_asked():
+    """One trajectory per area fraction, eta_r scattered by 5 % and its block standard error saying so:
+    resampling trajectories alone gives an empty interval; drawing each eta_r from its error gives one
+    that brackets the true phi_J, and one four times wider for errors four times larger."""
+    rng = np.random.default_rng(3)
+    runs = []
+    for phi in (0.79, 0.80, 0.81, 0.82, 0.83):
+        eta = 0.7 * (0.845 - phi) ** -2.0 * np.exp(rng.normal(0, 0.05))
+        runs.append({**_run(400, phi, 1.0, 1, eta, mu=0.0), "eta_se": 0.05 * eta})
+
+    def fit(s):
+        return fit_divergence([r["phi"] for r in s], [r["eta"] for r in s], 2.0)
+
+    def width(sample, **kw):
+        _, low, high = bootstrap(sample, fit, ["phi_j"], np.random.default_rng(0), 200, **kw)["phi_j"]
+        return low, high
+
+    low, high = width(runs)
+    assert low == high  # nothing to resample
+    low, high = width(runs, single_run_error=True)
+    assert low < 0.845 + 3 * (high - low) and high > 0.845 - 3 * (high - low) and 0 < high - low < 0.01
+    wider = [{**r, "eta_se": 4 * r["eta_se"]} for r in runs]
+    low4, high4 = width(wider, single_run_error=True)
+    assert (high4 - low4) / (high - low) == pytest.approx(4.0, rel=0.3)
+
+
 def test_command_line_names_a_bad_index(tmp_path, capsys):
     bad = tmp_path / "index.json"
     bad.write_text("not json")

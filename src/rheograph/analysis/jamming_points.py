@@ -14,7 +14,9 @@ Two fits of the steady relative viscosity of every finished trajectory (``summar
   phi_m = f phi_J^mu + (1 - f) phi_J^0 and f = Z_mu / Z, the measured fraction of frictional contacts of
   each trajectory (not a model of f(sigma)).
 
-Jammed runs have no viscosity and enter neither fit; the phase diagram marks them.
+Jammed runs have no viscosity and enter neither fit; the phase diagram marks them.  A state point with
+one trajectory has nothing to resample; with ``--single-run-error`` its eta_r is drawn from its block
+standard error instead (for a set of one seed per state point, such as the 3D plateau so far).
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ def read_runs(index_paths) -> list[dict]:
                     "status": entry["status"],
                     "strain": float(entry.get("strain") or np.nan),
                     "eta": float(s.get("viscosity") or np.nan),
+                    "eta_se": float(s.get("viscosity_se") or np.nan),
                     "z_mu": float(s.get("z_mu") if s.get("z_mu") is not None else np.nan),
                     "z": float(s.get("z") if s.get("z") is not None else np.nan),
                     "pressure": float(s.get("pressure") if s.get("pressure") is not None else np.nan),
@@ -225,15 +228,27 @@ def fit_wyart_cates(phi, f, eta, beta: float | None = 2.0, prefactor_in_f: bool 
     return out
 
 
-def bootstrap(runs: list[dict], fit, keys, rng, n_boot: int = BOOTSTRAP) -> dict:
+def bootstrap(
+    runs: list[dict], fit, keys, rng, n_boot: int = BOOTSTRAP, single_run_error: bool = False
+) -> dict:
     """(median, 16th, 84th percentile) of ``fit(runs)[key]`` over trajectories resampled with replacement
-    within each (phi, sigma) state point."""
+    within each (phi, sigma) state point.  A state point with one trajectory is held fixed (resampling
+    one run returns it), unless ``single_run_error``: then its eta_r is drawn log-normal about its
+    steady mean with the relative width of its block standard error (``eta_se``), the time-sampling
+    error that a second seed would otherwise show."""
     groups: dict = {}
     for r in runs:
         groups.setdefault((r["phi"], r["stress"], r["mu"]), []).append(r)
     values = {k: [] for k in keys}
     for _ in range(n_boot):
         sample = [g[i] for g in groups.values() for i in rng.integers(0, len(g), len(g))]
+        if single_run_error:
+            sample = [
+                {**r, "eta": r["eta"] * np.exp(rng.normal(0.0, r["eta_se"] / r["eta"]))}
+                if len(groups[(r["phi"], r["stress"], r["mu"])]) == 1 and r["eta_se"] > 0
+                else r
+                for r in sample
+            ]
         try:
             result = fit(sample)
         except InputError:
@@ -267,11 +282,15 @@ def size_label(n: int, dim: int) -> str:
 
 
 def jamming_table(
-    runs: list[dict], seed: int = 0, window: float = 0.05, n_boot: int = BOOTSTRAP
+    runs: list[dict],
+    seed: int = 0,
+    window: float = 0.05,
+    n_boot: int = BOOTSTRAP,
+    single_run_error: bool = False,
 ) -> list[dict]:
     """Fit rows per system (dimension and N; method, branch, phi_J with its 68 % interval over
     ``n_boot`` bootstrap samples, beta, rms); the divergence fits use the packing fractions within
-    ``window`` of the branch's highest (``near``)."""
+    ``window`` of the branch's highest (``near``).  ``single_run_error``: see ``bootstrap``."""
     rng = np.random.default_rng(seed)
     rows = []
     for dim, n, system in systems(runs):
@@ -340,6 +359,7 @@ def jamming_table(
                     ["phi_j", "beta"],
                     rng,
                     n_boot,
+                    single_run_error,
                 )
                 rows.append(
                     {
@@ -371,7 +391,9 @@ def jamming_table(
                     )
 
                 fit = wc(everything)
-                spread = bootstrap(everything, wc, ["phi_j0", "phi_jmu", "beta"], rng, n_boot)
+                spread = bootstrap(
+                    everything, wc, ["phi_j0", "phi_jmu", "beta"], rng, n_boot, single_run_error
+                )
                 for name, key in (("phi_J^0", "phi_j0"), ("phi_J^mu", "phi_jmu")):
                     rows.append(
                         {
@@ -563,13 +585,19 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--window", type=float, default=0.05, help="divergence fits: area fractions within this of the top"
     )
+    ap.add_argument(
+        "--single-run-error",
+        action="store_true",
+        help="bootstrap: draw the eta_r of a state point with one trajectory from its block standard "
+        "error (default: held fixed, so a set of one seed per state point has no interval)",
+    )
     args = ap.parse_args(argv)
     if args.record and not args.out:
         raise InputError("--record: give the page too (--out), whose section the record draws")
     if not 0.0 < args.window < 0.5:
         raise InputError(f"--window {args.window}: allowed 0 < window < 0.5")
     runs = read_runs(args.indexes)
-    rows = jamming_table(runs, args.seed, args.window)
+    rows = jamming_table(runs, args.seed, args.window, single_run_error=args.single_run_error)
     if not rows:
         raise InputError(f"{args.indexes}: no branch with three area fractions of flowing runs to fit")
     command = "python -m rheograph.analysis.jamming_points " + " ".join(
