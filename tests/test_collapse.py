@@ -104,3 +104,25 @@ def test_bad_input_is_refused_in_one_line(tmp_path):
         main(["--two", two, "--three", three, "--bootstrap", "3"])
     with pytest.raises(InputError, match="--record: give the page too"):
         main(["--two", two, "--three", three, "--record", str(tmp_path / "r.json")])
+
+
+def test_a_set_of_one_seed_per_state_point_gets_its_interval_from_the_block_errors(tmp_path):
+    """``--single-run-error``: with one trajectory per state point and a 5 % block error on η_r, the
+    φ_J^μ interval is empty when trajectories alone are resampled and a few 1e-3 wide otherwise,
+    around the exact 0.58."""
+    from rheograph.analysis.collapse import DEFAULT_METHOD, frictional_jamming_point
+    from rheograph.analysis.jamming_points import read_runs
+
+    path = tmp_path / "three.json"
+    _index(path, 3, 500, [0.54, 0.555, 0.565], 0.58)
+    index = json.loads(path.read_text())
+    index["runs"] = [r for r in index["runs"] if r["params"]["seed"] == 1]
+    for r in index["runs"]:
+        r["summary"]["viscosity_se"] = 0.05 * r["summary"]["viscosity"]
+    path.write_text(json.dumps(index))
+    runs = read_runs([path])
+    fixed = frictional_jamming_point(runs, 3, 500, DEFAULT_METHOD, 50)
+    drawn = frictional_jamming_point(runs, 3, 500, DEFAULT_METHOD, 50, single_run_error=True)
+    assert fixed["phi_j_ci"][0] == fixed["phi_j_ci"][1] == pytest.approx(0.58)
+    low, high = drawn["phi_j_ci"]
+    assert low < 0.58 < high and 5e-4 < high - low < 1e-2

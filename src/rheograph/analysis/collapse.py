@@ -44,15 +44,18 @@ ISOSTATIC_FRICTIONAL = {2: 3.0, 3: 4.0}
 FRICTIONAL_Z_MU = 1.0
 
 
-def frictional_jamming_point(runs: list[dict], dim: int, n: int, method: str, n_boot: int) -> dict:
+def frictional_jamming_point(
+    runs: list[dict], dim: int, n: int, method: str, n_boot: int, single_run_error: bool = False
+) -> dict:
     """φ_J^μ of the (dim, N) system of ``runs`` by the jamming-point fit named ``method``: the
-    jamming-point row (``phi_j``, its 68 % interval ``phi_j_ci`` over ``n_boot`` bootstrap samples)."""
+    jamming-point row (``phi_j``, its 68 % interval ``phi_j_ci`` over ``n_boot`` bootstrap samples;
+    ``single_run_error`` as in ``jamming_points.bootstrap``)."""
     system = [r for r in runs if r["dim"] == dim and r["n"] == n]
     if not system:
         raise InputError(f"no run with dim {dim} and N = {n} in the indexes given for that dimension")
     rows = [
         r
-        for r in jamming_table(system, n_boot=n_boot)
+        for r in jamming_table(system, n_boot=n_boot, single_run_error=single_run_error)
         if r["quantity"] == "phi_J^mu" and r["method"] == method and r["dim"] == dim and r["n"] == n
     ]
     if not rows:
@@ -251,6 +254,12 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--bootstrap", type=int, default=400, help="bootstrap samples of the phi_J^mu intervals (default 400)"
     )
+    ap.add_argument(
+        "--single-run-error",
+        action="store_true",
+        help="bootstrap: draw the eta_r of a state point with one trajectory from its block standard "
+        "error (as jamming_points --single-run-error; default: held fixed)",
+    )
     ap.add_argument("--out", help="markdown file whose <!-- collapse_2d_3d:start/end --> section gets it")
     ap.add_argument("--record", help="JSON record of the section and the figure's numbers")
     ap.add_argument("--figure", help="PNG of the three quantities against the distance to jamming")
@@ -264,7 +273,7 @@ def main(argv=None) -> None:
         runs = read_runs(indexes)
         if any(r["dim"] != dim for r in runs):
             raise InputError(f"--{side}: {indexes} hold runs of another dimension than {dim}")
-        fit = frictional_jamming_point(runs, dim, n, args.method, args.bootstrap)
+        fit = frictional_jamming_point(runs, dim, n, args.method, args.bootstrap, args.single_run_error)
         data[side] = {
             "n": n,
             "phi_j_mu": fit["phi_j"],
