@@ -4,8 +4,8 @@
         --lookup 'data/paper/multirun/N400_phi0.76_*/trajectory.h5'
     python -m bench.unknown_radii 'data/polydisperse_3d/multirun/*/trajectory.h5' \
         --models N500_phi0.56_3d N500_phi0.56_3d_confocal --section unknown_radii_3d \
-        --lookup 'data/flow_curves_3d/multirun/N500_phi0.56_s2_*/trajectory.h5' \
-        'data/flow_curves_3d/multirun/N500_phi0.56_s20_*/trajectory.h5'
+        --lookup 'data/flow_curves_3d/multirun/N500_phi0.56_s2_seed[12]_*/trajectory.h5' \
+        'data/flow_curves_3d/multirun/N500_phi0.56_s20_seed[12]_*/trajectory.h5'
 
 Real particles spread in size by several per cent and a microscope does not measure each radius; the
 shipped models were trained on two exact radii (1 and 1.4).  The runs scored here were simulated with
