@@ -67,13 +67,18 @@ def lookup_mean(targets: list[np.ndarray]) -> np.ndarray:
     return np.array([np.exp(mean[0]), np.exp(mean[1]), mean[2]])
 
 
+def _state_key(snaps):
+    """The (φ, σ) state-point key of a trajectory's snapshots."""
+    from rheograph.naming import state_point_key
+
+    return state_point_key(np.array([snaps.phi]), np.array([snaps.stress]))[0]
+
+
 def other_seeds_mean(members) -> list[np.ndarray | None]:
     """Per trajectory, the lookup a user of the same state point could have: over the *other*
     trajectories at its (N, φ, σ), the geometric means of η_r and Π (the scores are in log) and the mean
     of Z_μ, (K, 3) for its K snapshots (None where it is the only one)."""
-    from rheograph.naming import state_point_key
-
-    keys = [state_point_key(np.array([s.phi]), np.array([s.stress]))[0] for s, _ in members]
+    keys = [_state_key(s) for s, _ in members]
     targets = [s.targets[k] for s, k in members]
     out = []
     for i, (_, keep) in enumerate(members):
@@ -90,17 +95,14 @@ def reference_mean(members, references) -> tuple[list[np.ndarray | None], str]:
     indices) pairs, e.g. a smaller system's set): the geometric means of η_r and Π and the mean of Z_μ
     over the references' snapshots at its (φ, σ), (K, 3) for its K snapshots (None where no reference
     run has its state point); with the row's label."""
-    from rheograph.naming import state_point_key
-
-    def key(s):
-        return state_point_key(np.array([s.phi]), np.array([s.stress]))[0]
-
     pooled: dict = {}
     for s, k in references:
-        pooled.setdefault(key(s), []).append(s.targets[k])
+        pooled.setdefault(_state_key(s), []).append(s.targets[k])
     sizes = sorted({s.n_particles for s, _ in references})
     out = [
-        np.repeat(lookup_mean(pooled[key(s)])[None], keep.size, axis=0) if key(s) in pooled else None
+        np.repeat(lookup_mean(pooled[_state_key(s)])[None], keep.size, axis=0)
+        if _state_key(s) in pooled
+        else None
         for s, keep in members
     ]
     return out, f"lookup: mean of the N = {', '.join(map(str, sizes))} runs at (φ, σ)"
