@@ -548,6 +548,7 @@ def snapshot_graph(
     return Data(
         x=torch.from_numpy(node_features(radii, params["size_ratio"])),
         pos=torch.from_numpy(np.asarray(positions, dtype=np.float64)),
+        radius=torch.from_numpy(np.asarray(radii, dtype=np.float64)),
         box=torch.tensor([list(box)], dtype=torch.float64),
         edge_index=torch.from_numpy(edge_index).long(),
         edge_attr=torch.from_numpy(edge_attr).float(),
@@ -644,7 +645,7 @@ class NoisyGraphs(torch.utils.data.Dataset):
         """``g`` rebuilt from its positions plus noise of ``eps`` [a] per coordinate (3D, with
         ``eps_axial``: that along the optical axis instead)."""
         params = self.run_params[int(g.run_id)]
-        radii = np.where(g.x[:, 1].numpy() > 0.5, float(params["size_ratio"]), 1.0)
+        radii = g.radius.numpy()  # each particle's own: a polydisperse sample's are not the species' sizes
         pos = g.pos.numpy().astype(np.float64)
         box = tuple(float(v) for v in g.box[0])  # (lx, ly, le_offset), 3D (lx, ly, lz, le_offset)
         noisy = pos + rng.normal(
@@ -778,8 +779,9 @@ class SnapshotGraphDataset(InMemoryDataset):
                 # of the jam detector's window on (one row earlier than 3); 5: positions and box in each
                 # graph, any snapshot source; 6: positions in float64, shell and noise inputs; 7: the
                 # strain each snapshot was relaxed by; 8: tensors and plain values only (read without
-                # unpickling objects), no PyG class stored
-                "version": 8,
+                # unpickling objects), no PyG class stored; 9: each particle's radius (noisy rebuilds of
+                # polydisperse snapshots read them)
+                "version": 9,
             },
             sort_keys=True,
             default=list,
