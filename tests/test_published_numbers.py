@@ -91,7 +91,8 @@ def test_positions_only_bundle_reproduces_its_committed_test_predictions():
         pytest.param("N400_phi0.70_imaging", marks=pytest.mark.slow),
         pytest.param("N400_phi0.76_imaging", marks=pytest.mark.slow),
         pytest.param("N400_phi0.80_imaging", marks=pytest.mark.slow),
-        pytest.param("N500_phi0.56_3d_confocal", marks=pytest.mark.slow),  # 3D graphs of 4 noisy copies
+        pytest.param("N500_phi0.50_3d_confocal", marks=pytest.mark.slow),  # 3D graphs of 4 noisy copies
+        pytest.param("N500_phi0.56_3d_confocal", marks=pytest.mark.slow),
         "pooled_N400_imaging",
     ],
 )
