@@ -87,7 +87,8 @@ def cell(folds: list[dict], key: str) -> str:
 def section(runs: list[dict], command: str) -> Section:
     out = Section(
         "The shipped 3D models, one per volume fraction: N = 500 spheres, the runs of the 3D flow-curve "
-        "set at that φ (σ/σ0 = 0.5–200, two seeds each, strain 3, `campaign=flow_curves_3d`, committed in "
+        "set at that φ (eight stresses σ/σ0 = 0.5–200, every seed there: the run counts below; strain 3, "
+        "`campaign=flow_curves_3d`, committed in "
         "`data/flow_curves_3d/`), the demo model and inputs (`graph=physics_solve`: one resistance solve "
         "of the 3D simulator on the snapshot, the contact-spring pressure, the counted frictional "
         "contacts), five folds holding out whole trajectories (mean ± standard deviation over the folds).  "
