@@ -92,7 +92,7 @@ def section(runs: list[dict], command: str) -> Section:
         "`data/flow_curves_3d/`), the demo model and inputs (`graph=physics_solve`: one resistance solve "
         "of the 3D simulator on the snapshot, the contact-spring pressure, the counted frictional "
         "contacts), five folds holding out whole trajectories (mean ± standard deviation over the folds).  "
-        "Each model was trained (about 6 minutes on one core) and shipped by",
+        "Each model was trained (6–9 minutes on one core) and shipped by",
         "",
     )
     for run in runs:
@@ -148,7 +148,7 @@ def pooled_section(pooled: dict, command: str) -> Section:
     out = Section(
         f"One model over every volume fraction of the 3D set (N = {n}; φ and log σ as graph-level inputs "
         "besides the physics inputs; `experiment=pooled_grouped`: 40 epochs, five folds holding out whole "
-        "trajectories of every state point), trained (about 11 minutes on one core) and shipped by",
+        "trajectories of every state point), trained (23 minutes on one core) and shipped by",
         "",
         "    python train.py experiment=pooled_grouped data.files=data/flow_curves_3d/index.json \\",
         f"        data.n_particles={n} fold_workers=1 output_root=outputs/pooled_3d",
