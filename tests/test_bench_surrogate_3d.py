@@ -14,7 +14,7 @@ RUN = ROOT / "docs" / "results" / "surrogate_3d" / "N500_phi0.56"
 def test_rows_come_from_the_folds_metrics():
     bench = load_bench_script("surrogate_3d")
     run = bench.read_run(RUN)
-    assert (run["n"], run["phi"], run["trajectories"], run["snapshots"]) == (500, 0.56, 16, 320)
+    assert (run["n"], run["phi"], run["trajectories"], run["snapshots"]) == (500, 0.56, 24, 480)
     folds = json.loads((RUN / "metrics.json").read_text())["folds"]
     values = [f["test/r2_log_eta"] for f in folds]
     assert bench.cell(folds, "test/r2_log_eta") == f"{np.mean(values):.3f} ± {np.std(values, ddof=1):.3f}"
@@ -44,7 +44,7 @@ def test_the_pooled_table_scores_each_phi_on_its_own_test_snapshots():
     bench = load_bench_script("surrogate_3d")
     pooled = bench.read_pooled(POOLED)
     counts = {phi: e["trajectories"] for phi, e in pooled["per_phi"].items()}
-    assert counts == {0.5: 16, 0.53: 1, 0.55: 1, 0.56: 16}
+    assert counts == {0.5: 24, 0.53: 1, 0.55: 1, 0.56: 24, 0.57: 1, 0.58: 1}
     for k in range(5):
         with np.load(POOLED / f"fold{k}_predictions.npz") as saved:
             at = np.isclose(saved["phi"], 0.56)
