@@ -146,11 +146,15 @@ def test_flow_curve_cell_reports_the_arrested_packing_instead_of_nan():
     from rheograph.analysis.dataset_card import flow_curve_cell
 
     nan = float("nan")
-    point = dict(n_particles=400, phi=0.8, stress=100.0, jammed=True)
+    point = dict(n_particles=400, phi=0.8, mu=0.5, radii="", stress=100.0, jammed=True)
     point.update(viscosity=nan, viscosity_se=nan, pressure=nan, pressure_se=nan, z_mu=nan, z_mu_se=nan)
     arrested = [np.array([200.0, 220.0]), np.array([240.0])]
-    records = [dict(n=400, phi=0.8, stress=100.0, arrested=dict(pressure=a, z_mu=a / 100)) for a in arrested]
-    records.append(dict(n=400, phi=0.8, stress=200.0, arrested=dict(pressure=np.array([1e6]), z_mu=[9])))
+    same = dict(n=400, phi=0.8, mu=0.5, radii="")
+    records = [dict(same, stress=100.0, arrested=dict(pressure=a, z_mu=a / 100)) for a in arrested]
+    records.append(dict(same, stress=200.0, arrested=dict(pressure=np.array([1e6]), z_mu=[9])))
+    # another suspension at the same state point: spread radii, or frictionless
+    for other in (dict(radii="polydisperse 0.1"), dict(mu=0.0)):
+        records.append(dict(same, stress=100.0, **other, arrested=dict(pressure=np.array([1e6]), z_mu=[9])))
     assert flow_curve_cell(point, "viscosity", records) == "jammed"
     assert flow_curve_cell(point, "pressure", records) == "220 ± 12 (arrested)"
     assert flow_curve_cell(point, "z_mu", records) == "2.2 ± 0.12 (arrested)"
@@ -167,7 +171,7 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
 
     def record(stress, status, flowing, seed=1):
         return dict(
-            n=2000, phi=0.8, mu=0.5, stress=stress, seed=seed, status=status, n_snapshots=flowing,
+            n=2000, phi=0.8, mu=0.5, radii="", stress=stress, seed=seed, status=status, n_snapshots=flowing,
             n_flowing_snapshots=flowing, n_jammed_snapshots=0, cpu_seconds=3600.0, bytes=10**6,
             snapshot_interval=0.1, decorrelation=dict(viscosity=0.2, pressure=0.2, z_mu=0.2),
             transient=0.3, arrested=dict(pressure=np.array([]), z_mu=np.array([])),
@@ -182,7 +186,8 @@ def test_the_card_counts_snapshots_of_finished_runs_and_marks_provisional_means(
 
     def point(stress, statuses, seeds):
         return dict(
-            n_particles=2000, phi=0.8, mu=0.5, stress=stress, statuses=statuses, n_seeds=seeds, jammed=False,
+            n_particles=2000, phi=0.8, mu=0.5, radii="", stress=stress, statuses=statuses, n_seeds=seeds,
+            jammed=False,
             viscosity=1000.0, viscosity_se=50.0, pressure=40.0, pressure_se=1.0, z_mu=2.5, z_mu_se=0.01,
         )  # fmt: skip
 
@@ -207,6 +212,7 @@ def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_s
             n=400,
             phi=0.7,
             mu=0.5,
+            radii="",
             stress=stress,
             seed=seed,
             status="completed",
@@ -236,14 +242,15 @@ def test_the_card_reports_the_ensemble_transient_and_the_bias_of_counting_from_s
 def test_the_card_keeps_area_fractions_apart_that_two_decimals_would_merge_and_marks_frictionless_runs():
     from rheograph.analysis.dataset_card import series_label
 
-    assert [series_label(phi, 0.5) for phi in (0.785, 0.7875, 0.79, 0.795, 0.8)] == [
+    assert [series_label(phi, 0.5, "") for phi in (0.785, 0.7875, 0.79, 0.795, 0.8)] == [
         "0.785",
         "0.7875",
         "0.79",
         "0.795",
         "0.80",
     ]
-    assert series_label(0.8, 0.0) == "0.80, μ = 0"
+    assert series_label(0.8, 0.0, "") == "0.80, μ = 0"
+    assert series_label(0.56, 0.5, "polydisperse 0.05") == "0.56, polydisperse 0.05"
 
 
 def test_thickening_is_named_only_from_two_flowing_stresses():
@@ -252,7 +259,7 @@ def test_thickening_is_named_only_from_two_flowing_stresses():
     from rheograph.analysis.dataset_card import thickening_lines
 
     def point(stress, eta):
-        return dict(n_particles=400, phi=0.8, mu=0.5, stress=stress, viscosity=eta, jammed=False)
+        return dict(n_particles=400, phi=0.8, mu=0.5, radii="", stress=stress, viscosity=eta, jammed=False)
 
     (one,) = thickening_lines([point(20.0, 2000.0)])
     (rising,) = thickening_lines([point(10.0, 100.0), point(20.0, 150.0)])  # rate 0.1 -> 0.133
@@ -260,3 +267,36 @@ def test_thickening_is_named_only_from_two_flowing_stresses():
     assert "one flowing stress" in one and "continuous" not in one
     assert "| continuous |" in rising
     assert "discontinuous (S-shape)" in falling and "10 → 20" in falling
+
+
+def test_the_card_keeps_runs_of_other_radii_apart_from_the_bidisperse_ones():
+    """Runs at one (N, φ) whose radii spread by 5 % and 10 % are two series of the card, never pooled as
+    seeds of one: a row each in the counts, the runs per state point and the flow curves."""
+    from rheograph.analysis.dataset_card import card_markdown
+
+    def record(radii, seed):
+        return dict(
+            n=500, phi=0.56, mu=0.5, radii=radii, stress=2.0, seed=seed, status="completed", n_snapshots=20,
+            n_flowing_snapshots=20, n_jammed_snapshots=0, cpu_seconds=3600.0, bytes=10**6,
+            snapshot_interval=0.1, decorrelation=dict(viscosity=0.1, pressure=0.1, z_mu=0.1), transient=0.2,
+            arrested=dict(pressure=np.array([]), z_mu=np.array([])),
+            log_viscosity_series=(np.array([0.0, 1.0]), np.zeros(2), 2.0),
+        )  # fmt: skip
+
+    def point(radii, eta):
+        return dict(
+            n_particles=500, phi=0.56, mu=0.5, radii=radii, stress=2.0, statuses=["completed"], n_seeds=1,
+            jammed=False, viscosity=eta, viscosity_se=1.0, pressure=10.0, pressure_se=0.1, z_mu=2.0,
+            z_mu_se=0.01,
+        )  # fmt: skip
+
+    spreads = ("polydisperse 0.05", "polydisperse 0.1")
+    records = [record(radii, 2) for radii in spreads] + [record("", seed) for seed in (1, 2, 3)]
+    points = [point("", 30.0), point(spreads[0], 32.0), point(spreads[1], 35.0)]
+    card = card_markdown(records, points, "python simulate.py -m …", 1.0)
+    assert "| 500 | 0.56 | 3 | 3 | 3 | 0 | 0 | 60 | 0 | 3.00 | 3.0 |" in card
+    for radii in spreads:
+        assert f"| 500 | 0.56, {radii} | 1 | 1 | 1 | 0 | 0 | 20 | 0 | 1.00 | 1.0 |" in card
+    assert "| σ/σ0 | φ = 0.56 | φ = 0.56, polydisperse 0.05 | φ = 0.56, polydisperse 0.1 |" in card
+    assert "| 2 | 3/3 | 1/1 | 1/1 |" in card
+    assert "| 500 | 0.56, polydisperse 0.1 | 2 | 1 | 35 ± 1 |" in card

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.analysis.flow_curves import state_points
+from rheograph.analysis.flow_curves import radii_label, state_points
 from rheograph.analysis.steady import (
     decorrelation_strain,
     ensemble_transient,
@@ -109,6 +109,7 @@ def run_records(index: dict, min_strain: float) -> list[dict]:
                 dim=p.get("dim", 2),
                 phi=p["phi"],
                 mu=p["mu"],
+                radii=radii_label(p),
                 stress=p["stress"],
                 seed=p["seed"],
                 status=entry["status"],
@@ -163,7 +164,8 @@ def flow_curve_cell(point: dict, key: str, records: list[dict]) -> str:
         [
             r["arrested"][key]
             for r in records
-            if (r["n"], r["phi"], r["stress"]) == (point["n_particles"], point["phi"], point["stress"])
+            if (r["n"], *series_of(r), r["stress"])
+            == (point["n_particles"], *series_of(point), point["stress"])
         ]
     )
     if values.size == 0:
@@ -193,11 +195,16 @@ def jamming_onset(runs: list[dict]) -> str:
     return (f"none up to {max(flowed):g}" if flowed else "none yet") + pending
 
 
-def series_label(phi: float, mu: float) -> str:
+def series_label(phi: float, mu: float, radii: str) -> str:
     """φ as simulated (two decimals at least, no rounding: 0.785 and 0.79 stay apart), with frictionless
-    runs (μ = 0) marked."""
+    runs (μ = 0) and radii other than the bidisperse default (``radii``: ``radii_label``) marked."""
     text = f"{phi:.2f}" if round(phi, 2) == phi else f"{phi:g}"
-    return text + (", μ = 0" if mu == 0.0 else "")
+    return text + (", μ = 0" if mu == 0.0 else "") + (f", {radii}" if radii else "")
+
+
+def series_of(entry: dict) -> tuple[float, float, str]:
+    """(φ, μ, radii) of a run record or a flow-curve point: the runs one flow curve pools (seeds only)."""
+    return entry["phi"], entry["mu"], entry["radii"]
 
 
 def _median(values) -> str:
@@ -210,7 +217,7 @@ def card_markdown(
 ) -> str:
     by_phi_n = defaultdict(list)
     for r in records:
-        by_phi_n[(r["n"], r["phi"], r["mu"])].append(r)
+        by_phi_n[(r["n"], *series_of(r))].append(r)
     three_d = [
         "3D suspensions: spheres in a cube, φ a volume fraction (every file's `dim` is 3).",
         "",
@@ -239,11 +246,11 @@ def card_markdown(
         "| CPU h | MB |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for (n, phi, mu), runs in sorted(by_phi_n.items()):
+    for (n, *series), runs in sorted(by_phi_n.items()):
         status = [r["status"] for r in runs]
         usable = [r for r in runs if r["status"] in USABLE]
         lines.append(
-            f"| {n} | {series_label(phi, mu)} | {len(runs)} | {len({r['seed'] for r in runs})} "
+            f"| {n} | {series_label(*series)} | {len(runs)} | {len({r['seed'] for r in runs})} "
             f"| {status.count('completed')} | {status.count('jammed')} "
             f"| {len(runs) - len(usable)} "
             f"| {sum(r['n_flowing_snapshots'] for r in usable)} "
@@ -288,7 +295,7 @@ def card_markdown(
     ]
     stresses = sorted({r["stress"] for r in records})
     for n in sorted({r["n"] for r in records}):
-        series = sorted({(r["phi"], r["mu"]) for r in records if r["n"] == n})
+        series = sorted({series_of(r) for r in records if r["n"] == n})
         lines += [
             f"N = {n}:",
             "",
@@ -297,12 +304,8 @@ def card_markdown(
         ]
         for s in stresses:
             cells = []
-            for phi, mu in series:
-                runs = [
-                    r
-                    for r in records
-                    if r["n"] == n and r["phi"] == phi and r["mu"] == mu and r["stress"] == s
-                ]
+            for x in series:
+                runs = [r for r in records if r["n"] == n and series_of(r) == x and r["stress"] == s]
                 done = sum(r["status"] == "completed" for r in runs)
                 jam = sum(r["status"] == "jammed" for r in runs)
                 cells.append(f"{done}/{len(runs)}" + (f" J{jam}" if jam else "") if runs else "–")
@@ -335,21 +338,21 @@ def card_markdown(
         "| neighbour correlation |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for (n, phi, mu), runs in sorted(by_phi_n.items()):
+    for (n, *series), runs in sorted(by_phi_n.items()):
         taus = [r["decorrelation"]["viscosity"] for r in runs if np.isfinite(r["decorrelation"]["viscosity"])]
         spacing = np.median([r["snapshot_interval"] for r in runs])
         neighbour = f"{np.exp(-spacing / np.median(taus)):.2f}" if taus else "–"
         lines.append(
-            f"| {n} | {series_label(phi, mu)} | "
+            f"| {n} | {series_label(*series)} | "
             + " | ".join(_median([r["decorrelation"][k] for r in runs]) for k in TARGETS)
             + f" | {_median([r['transient'] for r in runs])} | {_ensemble_transient_cells(runs, min_strain)}"
             f" | {spacing:g} | {neighbour} |"
         )
     jam_lines = []
-    for (n, phi, mu), runs in sorted(by_phi_n.items()):
+    for (n, *series), runs in sorted(by_phi_n.items()):
         for seed in sorted({r["seed"] for r in runs}):
             onset = jamming_onset([r for r in runs if r["seed"] == seed])
-            jam_lines.append(f"| {n} | {series_label(phi, mu)} | {seed} | {onset} |")
+            jam_lines.append(f"| {n} | {series_label(*series)} | {seed} | {onset} |")
     lines += [
         "",
         "## Shear jamming: smallest jammed σ/σ0 per seed",
@@ -378,7 +381,7 @@ def card_markdown(
         # a point averaged over an unfinished run is provisional: said in the seeds column
         seeds = f"{pt['n_seeds']}" + ("" if set(pt["statuses"]) <= set(USABLE) else " (unfinished)")
         lines.append(
-            f"| {pt['n_particles']} | {series_label(pt['phi'], pt['mu'])} | {pt['stress']:g} | {seeds} | "
+            f"| {pt['n_particles']} | {series_label(*series_of(pt))} | {pt['stress']:g} | {seeds} | "
             + " | ".join(cells)
             + " |"
         )
@@ -407,9 +410,9 @@ def thickening_lines(points: list[dict]) -> list[str]:
     means (gamma_dot = sigma / eta_r)."""
     by_n_phi = defaultdict(list)
     for pt in points:
-        by_n_phi[(pt["n_particles"], pt["phi"], pt["mu"])].append(pt)
+        by_n_phi[(pt["n_particles"], *series_of(pt))].append(pt)
     lines = []
-    for (n, phi, mu), pts in sorted(by_n_phi.items()):
+    for (n, *series), pts in sorted(by_n_phi.items()):
         pts = sorted(pts, key=lambda q: q["stress"])
         rate = {q["stress"]: q["stress"] / q["viscosity"] for q in pts if np.isfinite(q["viscosity"])}
         flowing = sorted(rate)
@@ -427,17 +430,16 @@ def thickening_lines(points: list[dict]) -> list[str]:
         else:
             kind = "– (one flowing stress)" if flowing else "–"
         lines.append(
-            f"| {n} | {series_label(phi, mu)} | {kind} | {', '.join(falls) or '–'} | "
+            f"| {n} | {series_label(*series)} | {kind} | {', '.join(falls) or '–'} | "
             f"{', '.join(f'{s:g}' for s in stopped) or 'none'} |"
         )
     return lines
 
 
-def _flow_curve(points, n, phi, mu, key):
-    """(stresses, steady means) of one (N, phi, mu) flow curve, NaN-free."""
+def _flow_curve(points, n, series, key):
+    """(stresses, steady means) of one flow curve (N and ``series_of``), NaN-free."""
     pts = sorted(
-        (q for q in points if q["n_particles"] == n and q["phi"] == phi and q["mu"] == mu),
-        key=lambda q: q["stress"],
+        (q for q in points if q["n_particles"] == n and series_of(q) == series), key=lambda q: q["stress"]
     )
     s = np.array([q["stress"] for q in pts])
     v = np.array([q[key] for q in pts])
@@ -450,19 +452,15 @@ FIG3_BINS = 30  # bins per axis of the Fig. 3 densities
 
 
 def fig2_data(records: list[dict], points: list[dict]) -> dict:
-    """The numbers of :func:`draw_fig2`: per N (``sizes``) and (φ, μ) series, the flowing snapshots'
+    """The numbers of :func:`draw_fig2`: per N (``sizes``) and (φ, μ, radii) series, the flowing snapshots'
     σ/σ0, η_r, γ̇/γ̇0, Π/σ0 and Z_μ (one entry per snapshot), the arrested snapshots' σ/σ0, Π/σ0 and Z_μ,
     and the steady flow-curve means (σ/σ0 and value per target, NaN-free)."""
     sizes = sorted({r["n"] for r in records})
-    series = sorted({(r["phi"], r["mu"]) for r in records})
+    series = sorted({series_of(r) for r in records})
     panels = []
     for n in sizes:
-        for phi, mu in series:
-            runs = [
-                r
-                for r in records
-                if r["n"] == n and r["phi"] == phi and r["mu"] == mu and r["status"] in USABLE
-            ]
+        for x in series:
+            runs = [r for r in records if r["n"] == n and series_of(r) == x and r["status"] in USABLE]
             if not runs:
                 continue
             flowing = [r for r in runs if r["n_flowing_snapshots"]]
@@ -470,15 +468,15 @@ def fig2_data(records: list[dict], points: list[dict]) -> dict:
             panels.append(
                 {
                     "n": n,
-                    "phi": phi,
-                    "mu": mu,
+                    "phi": x[0],
+                    "mu": x[1],
+                    "radii": x[2],
                     "flowing": _snapshots(
                         flowing, "n_flowing_snapshots", "snapshots", (*TARGETS, "shear_rate")
                     ),
                     "arrested": _snapshots(arrested, "n_jammed_snapshots", "arrested", ("pressure", "z_mu")),
                     "means": {
-                        key: [significant(v, 6) for v in _flow_curve(points, n, phi, mu, key)]
-                        for key in TARGETS
+                        key: [significant(v, 6) for v in _flow_curve(points, n, x, key)] for key in TARGETS
                     },
                 }
             )
@@ -507,13 +505,12 @@ def draw_fig2(data: dict):
     rng = np.random.default_rng(0)
     for axes, n in zip(grid, ns):
         for panel in (p for p in data["panels"] if p["n"] == n):
-            phi, mu = panel["phi"], panel["mu"]
-            colour = colours[(phi, mu)]
+            colour = colours[series_of(panel)]
             snap = {k: np.array(v) for k, v in panel["flowing"].items()}
             if snap["stress"].size:
                 s = snap["stress"] * np.exp(rng.normal(0, 0.03, snap["stress"].size))  # side by side
                 kw = dict(s=4, alpha=0.35, color=colour)
-                axes[0].scatter(s, snap["viscosity"], label=f"φ = {series_label(phi, mu)}", **kw)
+                axes[0].scatter(s, snap["viscosity"], label=f"φ = {series_label(*series_of(panel))}", **kw)
                 axes[1].scatter(snap["shear_rate"], snap["viscosity"], **kw)
                 axes[2].scatter(s, snap["pressure"], **kw)
                 axes[3].scatter(s, snap["z_mu"], **kw)
@@ -553,20 +550,20 @@ def _has_points(ax) -> bool:
 
 
 def fig3_data(records: list[dict]) -> dict:
-    """The numbers of :func:`draw_fig3`: per (φ, μ) series (flowing snapshots of finished runs, all N),
+    """The numbers of :func:`draw_fig3`: per (φ, μ, radii) series (flowing snapshots of finished runs, all N),
     the counts of (Z_μ, log10 η_r) and of (Z_μ, log10 Π/σ0) in ``FIG3_BINS`` x ``FIG3_BINS`` bins
     (``counts[i][j]``: Z_μ bin i, log bin j) and the bin edges (``FIG3_BINS`` + 1 each); null for a
     series without flowing snapshots."""
     out = []
-    for phi, mu in sorted({(r["phi"], r["mu"]) for r in records}):
+    for phi, mu, radii in sorted({series_of(r) for r in records}):
         runs = [
             r
             for r in records
-            if r["phi"] == phi and r["mu"] == mu and r["n_flowing_snapshots"] and r["status"] in USABLE
+            if series_of(r) == (phi, mu, radii) and r["n_flowing_snapshots"] and r["status"] in USABLE
         ]
         densities = {"viscosity": None, "pressure": None}  # a series that never flowed: an empty column
         if not runs:
-            out.append({"phi": phi, "mu": mu, **densities})
+            out.append({"phi": phi, "mu": mu, "radii": radii, **densities})
             continue
         z = np.concatenate([r["snapshots"]["z_mu"] for r in runs])
         for key in ("viscosity", "pressure"):
@@ -578,7 +575,7 @@ def fig3_data(records: list[dict]) -> dict:
                 "log_edges": log_edges.tolist(),
                 "counts": counts.astype(int).tolist(),
             }
-        out.append({"phi": phi, "mu": mu, **densities})
+        out.append({"phi": phi, "mu": mu, "radii": radii, **densities})
     return {"series": out}
 
 
@@ -610,7 +607,7 @@ def draw_fig3(data: dict):
             # the marginals are the densities' sums: the histograms of Z_μ and of the log on those bins
             top.hist(x[:-1], bins=x, weights=counts.sum(axis=1), color="grey")
             side.hist(y[:-1], bins=y, weights=counts.sum(axis=0), color="grey", orientation="horizontal")
-            top.set_title(f"φ = {series_label(entry['phi'], entry['mu'])}" if row == 1 else "", fontsize=9)
+            top.set_title(f"φ = {series_label(*series_of(entry))}" if row == 1 else "", fontsize=9)
             top.tick_params(labelbottom=False)
             side.tick_params(labelleft=False)
             main.set_xlabel("Z_μ")
