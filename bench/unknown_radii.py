@@ -30,8 +30,9 @@ With the true radii (or estimated ones) the models read each particle's species 
 everything else from the radii themselves, and flag the snapshot (trained on two exact radii). Scores:
 R² of log10 η_r, log10 Π and Z_μ over the snapshots at strain >= ``--min-strain`` of all runs of one
 spread; the lookup row is the mean of the bidisperse training runs at each σ (``--lookup``), which reads
-no positions. The table replaces the marked section ``unknown_radii`` of docs/imaging.md unless
-``--no-write``; its numbers are kept in docs/results/bench/unknown_radii.json.
+no positions.  Runs not finished (still going or interrupted) are left out and counted.  The table
+replaces the marked section ``unknown_radii`` of docs/imaging.md unless ``--no-write``; its numbers are
+kept in docs/results/bench/unknown_radii.json.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ import numpy as np
 from bench.lfdem_snapshots import scores, state_means
 from bench.publishing import command_line, publish, table
 from rheograph.errors import InputError
+from rheograph.io.index import USABLE
 
 NOMINAL = (1.0, 1.4)
 # what the models are given
@@ -111,8 +113,14 @@ def main(argv=None) -> int:
 
     by_spread: dict = {}
     systems = set()
+    unfinished = []
     for path in files:
-        params = read_run_info(path)["params"]
+        info = read_run_info(path)
+        params = info["params"]
+        # a run still going (or interrupted) is left out: it would score differently once resumed
+        if info["status"] not in USABLE:
+            unfinished.append(path)
+            continue
         if params.get("radii") != "polydisperse":
             sys.exit(f"unknown_radii: {path} is not a run of sim.radii=polydisperse")
         dim = int(params.get("dim", 2))
@@ -122,6 +130,8 @@ def main(argv=None) -> int:
         runs = by_spread.setdefault(float(params["polydispersity"]), [])
         runs.append((read_snapshots(path), params["n_particles"] - n_large))
 
+    if not systems:
+        sys.exit(f"unknown_radii: {args.runs} match no finished run")
     if len(systems) > 1:
         sys.exit(f"unknown_radii: the runs are of several systems (dimension, N, φ): {sorted(systems)}")
     ((dim, n_particles, phi),) = systems
@@ -136,6 +146,13 @@ def main(argv=None) -> int:
         "given estimated radii told their uncertainty (their scatter over the run's snapshots; the positions "
         "are exact); in domain: the share of snapshots the model does not flag.\n",
     ]
+    counts = "; ".join(
+        f"p = {spread:g}: {len(runs)} runs at {len({float(snaps.stress) for snaps, _ in runs})} stresses"
+        for spread, runs in sorted(by_spread.items())
+    )
+    left_out = f"; unfinished, left out: {len(unfinished)}" if unfinished else ""
+    lines.append(f"Runs scored: {counts}{left_out}.\n")
+    record["unfinished_left_out"] = unfinished
     body = []
     for spread, runs in sorted(by_spread.items()):
         rows = {}
