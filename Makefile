@@ -86,6 +86,11 @@ cards: install
 	    --record docs/results/bench/figures/dataset_flow_curves_3d.json \
 	    --title "Dataset card: the 3D flow-curve set (in progress)" \
 	    --command "python simulate.py -m campaign=flow_curves_3d"
+	$(PY) -m rheograph.analysis.dataset_card data/polydisperse_flow_curves_3d \
+	    --out docs/datasets/polydisperse_flow_curves_3d \
+	    --record docs/results/bench/figures/dataset_polydisperse_flow_curves_3d.json \
+	    --title "Dataset card: 3D flow curves of polydisperse spheres" \
+	    --command "python simulate.py -m campaign=polydisperse_flow_curves_3d"
 	$(PY) -m rheograph.analysis.dataset_card data/jamming --out docs/datasets/jamming \
 	    --record docs/results/bench/figures/dataset_jamming.json \
 	    --title "Dataset card: runs near jamming" \
