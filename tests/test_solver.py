@@ -5,7 +5,15 @@ import pytest
 
 from rheograph.sim import SimParams, Simulation
 from rheograph.sim.assembly import dense_from_upper_csc
-from rheograph.sim.solver import SOLVERS, cholmod_available, make_solver, resolve_solver_name
+from rheograph.sim.solver import (
+    AMG_AUTO_PARTICLES,
+    AMG_RTOL,
+    DIRECT_SOLVERS,
+    AMGSolver,
+    cholmod_available,
+    make_solver,
+    resolve_solver_name,
+)
 
 needs_cholmod = pytest.mark.skipif(not cholmod_available(), reason="scikit-sparse missing")
 BACKENDS = ["qdldl", pytest.param("cholmod", marks=needs_cholmod)]
@@ -63,7 +71,7 @@ def test_backend_matches_dense_solve_and_reuses_the_analysis(name):
 def test_backends_give_the_same_trajectory_to_round_off():
     runs = {}
     start = Simulation(SimParams(n_particles=80, phi=0.76, stress=10.0, strain=1.0, seed=4)).state.positions
-    for name in SOLVERS:
+    for name in DIRECT_SOLVERS:
         sim = Simulation(SimParams(n_particles=80, phi=0.76, stress=10.0, strain=1.0, seed=4), solver=name)
         for _ in range(150):
             sim.step()
@@ -77,3 +85,69 @@ def test_unknown_solver_is_refused_with_the_allowed_names():
     with pytest.raises(ValueError, match="solver='umfpack' is unknown: allowed 'auto' or one of"):
         resolve_solver_name("umfpack")
     assert resolve_solver_name("auto") == ("cholmod" if cholmod_available() else "qdldl")
+
+
+def test_multigrid_solves_to_its_tolerance_and_starts_from_the_last_solution():
+    matrices, ndof = captured_matrices()
+    solver = AMGSolver(dof_per_particle=3)
+    rhs = np.random.default_rng(5).normal(size=(ndof, 2))
+    pattern = None
+    for data, indptr, indices in matrices:
+        if pattern is None or not (
+            np.array_equal(indptr, pattern[0]) and np.array_equal(indices, pattern[1])
+        ):
+            solver.analyze(indptr, indices, ndof)
+            pattern = (indptr, indices)
+        solver.factorize(data)
+        dense = dense_from_upper_csc(data, indices, indptr, ndof)
+        x = solver.solve(rhs)
+        for k in range(2):
+            assert np.linalg.norm(dense @ x[:, k] - rhs[:, k]) <= AMG_RTOL * np.linalg.norm(rhs[:, k])
+            exact = np.linalg.solve(dense, rhs[:, k])
+            assert np.abs(x[:, k] - exact).max() < 1e-4 * np.abs(exact).max()
+        assert 0 < max(solver.iterations) < 100
+        # the same problem again: the previous solution already solves it
+        solver.solve(rhs)
+        assert solver.iterations == [0, 0]
+    assert solver.fallbacks == 0
+
+
+def test_multigrid_that_misses_its_tolerance_falls_back_to_the_direct_solve(caplog):
+    (data, indptr, indices), ndof = captured_matrices(n_steps=50)[0][-1], 240
+    solver = AMGSolver(dof_per_particle=3, max_iterations=1)
+    solver.analyze(indptr, indices, ndof)
+    solver.factorize(data)
+    b = np.random.default_rng(6).normal(size=ndof)
+    with caplog.at_level("WARNING", logger="rheograph"):
+        x = solver.solve(b)
+    dense = dense_from_upper_csc(data, indices, indptr, ndof)
+    np.testing.assert_allclose(x, np.linalg.solve(dense, b), rtol=1e-7, atol=1e-9 * np.abs(x).max())
+    assert solver.fallbacks == 1
+    assert "redone by the direct solver" in caplog.text
+
+
+def test_multigrid_steps_spheres_like_the_direct_solver():
+    from rheograph.sim.integrator3d import Simulation3D
+    from rheograph.sim.params3d import SimParams3D
+
+    params = SimParams3D(n_particles=120, phi=0.55, stress=10.0, seed=2)
+    direct, multigrid = Simulation3D(params, solver="qdldl"), Simulation3D(params, solver="amg")
+    assert multigrid.solver.name == "amg" and multigrid.solver.dof_per_particle == 6
+    for _ in range(30):
+        problems = [sim.prepare_step() for sim in (direct, multigrid)]
+        velocities = [sim.solve_linear(lp) for sim, lp in zip((direct, multigrid), problems)]
+        scale = np.abs(velocities[0]).max(axis=0)
+        assert np.all(np.abs(velocities[1] - velocities[0]).max(axis=0) <= 1e-4 * scale)
+        for sim, lp, v in zip((direct, multigrid), problems, velocities):
+            sim.complete_step(lp, v, False)
+    assert 0 < max(multigrid.solver.iterations) < 100 and multigrid.solver.fallbacks == 0
+    np.testing.assert_allclose(multigrid.state.positions, direct.state.positions, atol=1e-6)
+
+
+def test_auto_takes_multigrid_for_large_sphere_systems_only():
+    direct = "cholmod" if cholmod_available() else "qdldl"
+    assert resolve_solver_name("auto", 6, AMG_AUTO_PARTICLES) == "amg"
+    assert resolve_solver_name("auto", 6, AMG_AUTO_PARTICLES - 1) == direct
+    assert resolve_solver_name("auto", 3, 100 * AMG_AUTO_PARTICLES) == direct  # discs: the direct factor
+    assert resolve_solver_name("amg") == "amg"
+    assert make_solver("auto", 6, AMG_AUTO_PARTICLES).name == "amg"

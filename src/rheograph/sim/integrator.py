@@ -337,7 +337,7 @@ class SimulationBase(ABC):
         if state is None:
             state = self.new_state(params)
         self.state = state
-        self.solver = make_solver(solver)
+        self.solver = make_solver(solver, self.DOF, state.radii.shape[0])
         self.stress_factor = stress_unit_factor(*self.edges())
         self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
         self.drag = self.one_body_drag(state.radii)
