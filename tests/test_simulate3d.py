@@ -218,6 +218,21 @@ def test_rate_control_holds_the_imposed_rate_in_the_written_series(tmp_path):
     assert "n1" in summary and "n2" in summary
 
 
+def test_a_run_by_the_iterative_solver_matches_the_direct_one_and_says_which_solved_it(
+    tmp_path, trajectory_3d
+):
+    """solver=amg writes the run the direct solver writes, to its tolerance (1e-6 relative residual), and
+    the file names the solver and counts the solves it had to redo exactly (none here)."""
+    path = tmp_path / "amg.h5"
+    assert run_state_point(SimParams3D(**TINY_3D), path, progress=False, solver="amg").status == "completed"
+    info, direct = read_run_info(path), read_run_info(trajectory_3d)
+    assert info["solver"] == "amg" and direct["solver"] in ("cholmod", "qdldl")
+    assert info["summary"]["solver_fallbacks"] == 0 and "solver_fallbacks" not in direct["summary"]
+    ours, theirs = read_timeseries(path), read_timeseries(trajectory_3d)
+    np.testing.assert_allclose(ours["strain"], theirs["strain"], rtol=1e-5)
+    np.testing.assert_allclose(ours["viscosity"], theirs["viscosity"], rtol=1e-4)
+
+
 @pytest.mark.parametrize(
     "override,message",
     [

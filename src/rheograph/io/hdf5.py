@@ -474,7 +474,7 @@ class TrajectoryFile:
             raise
 
     def record_solver(self, name: str) -> None:
-        """The sparse Cholesky backend of the latest invocation (results differ only by round-off)."""
+        """The linear solver of the latest invocation (``rheograph.sim.solver``)."""
         self.h5.attrs["solver"] = name
 
     def finish(self, status: str, summary: dict) -> None:

@@ -165,6 +165,8 @@ def run_state_point(
             # the run's cost in the units the scaling tables use: steps and the largest resident set
             summary["steps"] = int(sim.state.steps)
             summary["peak_memory_mb"] = loop.peak_memory_mb()
+            if hasattr(sim.solver, "fallbacks"):  # an iterative solver: its solves redone exactly
+                summary["solver_fallbacks"] = int(sim.solver.fallbacks)
             traj.finish(status, summary)  # partial runs get a summary too; their status says so
     except OSError as exc:
         if not hdf5_write_found_no_room(exc):
