@@ -8,7 +8,10 @@ predictor: R² of log η_r, log Π and Z_μ pooled over the folds' test snapshot
     python -m bench.confocal_noise outputs/confocal_3d/RUN --noise 0 0.01 0.03 0.05 --axial-noise 0 0.1 0.3
 
 One noise draw per (pair, snapshot), seeded (``--seed``).  The table replaces the marked section
-``--section`` of its page (docs/validation/surrogate_3d.md) unless ``--no-write``.
+``--section`` of its page (docs/validation/surrogate_3d.md) unless ``--no-write``.  A model over several
+volume fractions is scored per volume fraction (``--phi 0.5 0.56``: the test snapshots at each, one
+section ``<section>_phi<φ>`` each), as R² pooled over volume fractions would count the spread between
+them as skill.
 """
 
 from __future__ import annotations
@@ -27,14 +30,21 @@ METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("
 PREDICTORS = ("graph network", "lookup: mean at (φ, σ)", "trees on descriptors + σ")
 
 
-def pooled_scores(results: list[dict], levels) -> dict:
-    """{(predictor, level): {metric: value}} over the folds' rows ``results`` (``fold_rows`` each)."""
+def pooled_scores(results: list[dict], levels, phi: float | None = None) -> dict:
+    """{(predictor, level): {metric: value}} over the folds' rows ``results`` (``fold_rows`` each), of the
+    snapshots at volume fraction ``phi`` only where given."""
     from rheograph.learn.module import fold_metrics
 
     scores = {}
     for name, level in itertools.product(PREDICTORS, levels):
         parts = [rows[(name, level)] for rows in results]
-        pred, true, groups, jammed = (np.concatenate([p[i] for p in parts]) for i in range(4))
+        pred, true, groups, jammed, stress = (np.concatenate([p[i] for p in parts]) for i in range(5))
+        if phi is not None:
+            # state_point_key = round(phi, 6) * 1e6 + round(sigma, 6)
+            at = np.isclose((groups - np.round(stress, 6)) / 1e6, round(phi, 6), atol=1e-9)
+            if not at.any():
+                raise SystemExit(f"confocal_noise: --phi {phi:g}: no test snapshot at that volume fraction")
+            pred, true, groups, jammed = pred[at], true[at], groups[at], jammed[at]
         scores[(name, level)] = fold_metrics(pred, true, groups, jammed)
     return scores
 
@@ -47,6 +57,7 @@ def main(argv=None) -> int:
     ap.add_argument("--folds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cache-dir", default=str(ROOT / "data" / "cache"))
+    ap.add_argument("--phi", type=float, nargs="+", help="score the test snapshots of each φ apart")
     ap.add_argument("--section", default="confocal_noise")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
@@ -55,10 +66,18 @@ def main(argv=None) -> int:
         sys.exit(f"confocal_noise: {run_dir} lacks a fold model of folds {args.folds} (fold*.pt)")
     levels = list(itertools.product(args.noise, args.axial_noise))
     results = [fold_rows(run_dir, k, levels, args.seed, Path(args.cache_dir)) for k in args.folds]
-    scores = pooled_scores(results, levels)
     command = command_line("confocal_noise", argv)
+    for phi in args.phi or [None]:
+        scores = pooled_scores(results, levels, phi)
+        section = args.section if phi is None else f"{args.section}_phi{phi:g}"
+        publish_scores(scores, levels, run_dir, args, command, section, phi)
+    return 0
+
+
+def publish_scores(scores, levels, run_dir: Path, args, command: str, section: str, phi) -> None:
+    at = "" if phi is None else f" at φ = {phi:g}"
     out = Section(
-        f"Held-out test trajectories of `{run_dir.name}` ({len(args.folds)} folds), Gaussian noise of ε "
+        f"Held-out test trajectories{at} of `{run_dir.name}` ({len(args.folds)} folds), Gaussian noise of ε "
         "per coordinate across the optical axis and ε_z along it (units of a) on their positions, each "
         "fold's model on its own test trajectories; R² pooled over the folds' test snapshots "
         "(log10 for η_r and Π).",
@@ -81,14 +100,8 @@ def main(argv=None) -> int:
         },
     }
     publish(
-        args.section,
-        out,
-        not args.no_write,
-        page="validation/surrogate_3d.md",
-        record=record,
-        command=command,
+        section, out, not args.no_write, page="validation/surrogate_3d.md", record=record, command=command
     )
-    return 0
 
 
 if __name__ == "__main__":

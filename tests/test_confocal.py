@@ -228,3 +228,30 @@ def test_a_confocal_model_trains_predicts_and_is_scored_on_noise_pairs(tmp_path,
     network = [line for line in lines if "| graph network |" in line]
     assert len(lookup) == len(network) == 4
     assert len({line.split("|", 3)[3] for line in lookup}) == 1  # the same scores at every noise pair
+
+
+def test_a_model_over_several_volume_fractions_is_scored_at_each_apart():
+    """bench.confocal_noise --phi keeps the test snapshots of one volume fraction: a predictor exact at
+    φ 0.5 scores 1 there however it does at 0.56, and a φ with no test snapshot is refused in one line."""
+    from conftest import load_bench_script
+
+    from rheograph.naming import state_point_key
+
+    bench = load_bench_script("confocal_noise")
+    rng = np.random.default_rng(0)
+    phi = np.repeat([0.5, 0.56], 40)
+    stress = np.tile(np.repeat([2.0, 10.0], 20), 2)
+    true = np.stack([np.log10(30 * stress * (1 + phi)), np.log10(stress), 3 + phi], 1) + rng.normal(
+        0, 0.1, (80, 3)
+    )
+    pred = np.where((phi == 0.5)[:, None], true, true + rng.normal(0, 0.5, (80, 3)))
+    row = (pred, true, state_point_key(phi, stress), np.zeros(80, bool), stress)
+    level = (0.03, 0.3)
+    results = [{(name, level): row for name in bench.PREDICTORS}]
+    at_050 = bench.pooled_scores(results, [level], 0.5)[("graph network", level)]
+    at_056 = bench.pooled_scores(results, [level], 0.56)[("graph network", level)]
+    pooled = bench.pooled_scores(results, [level])[("graph network", level)]
+    assert at_050["r2_log_eta"] == pytest.approx(1.0) and at_056["r2_log_eta"] < 0.9
+    assert at_056["r2_log_eta"] < pooled["r2_log_eta"] < 1.0
+    with pytest.raises(SystemExit, match="--phi 0.53: no test snapshot at that volume fraction"):
+        bench.pooled_scores(results, [level], 0.53)
