@@ -167,7 +167,7 @@ class AMGSolver(SparseSPDSolver):
     motion, so a cluster of near-touching particles translating together is what the one-body drag alone
     resists, the slow mode that plain CG converges on last.  (Rigid rotations would need the positions;
     measured, they save no iteration and make each dearer.)  The hierarchy is rebuilt at each
-    ``factorize`` (15-20 % of a solve pair; a hierarchy kept for ten steps cost more iterations than it
+    ``factorize`` (a fifth to a quarter of a step; kept for two or ten steps it cost more iterations than it
     saved).  ``solve`` starts each right-hand side column from the solution of the same column in the
     previous call: the integrator's columns (springs, unit-rate flow) change little from step to step.
 
