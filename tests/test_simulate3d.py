@@ -331,6 +331,23 @@ def test_the_memory_estimate_of_a_3d_run_is_its_own(monkeypatch):
     check_simulation_memory(20_000)  # 2D: 0.18 GB
     with pytest.raises(InputError, match="a 3D simulation of sim.n_particles=20000 needs about 4.52 GB"):
         check_simulation_memory(20_000, dim=3)
+    # the multigrid solver keeps no factor: memory linear in N (measured 34-39 kB per particle)
+    assert simulation_bytes(16000, dim=3, iterative=True) == pytest.approx(1.5 * 40e3 * 16000)
+    check_simulation_memory(16_000, dim=3, iterative=True)  # 0.96 GB
+    with pytest.raises(InputError, match="a 3D simulation of sim.n_particles=20000 needs about 1.2"):
+        check_simulation_memory(20_000, dim=3, iterative=True)
+
+
+def test_a_large_3d_simulation_is_sized_for_the_solver_auto_picks(monkeypatch):
+    """solver=auto takes the multigrid solver for 3D systems from N = 4000, so the memory check before a
+    run counts its memory, not a sparse factor's; a forced direct solver is counted as one."""
+    from rheograph.sim.integrator3d import Simulation3D
+
+    monkeypatch.setenv("RHEOGRAPH_MEMORY_LIMIT_GB", "1")
+    with pytest.raises(InputError, match="needs about 1.2"):
+        Simulation3D(SimParams3D(n_particles=20_000, phi=0.5))
+    with pytest.raises(InputError, match="needs about 4.52 GB"):
+        Simulation3D(SimParams3D(n_particles=20_000, phi=0.5), solver="qdldl")
 
 
 def test_the_3d_preset_sets_every_3d_parameter_with_the_2d_physics():

@@ -37,6 +37,10 @@ SIMULATION_BYTES_PER_PARTICLE = 6.0e3
 # the 70 kB are scaled by (N / 2000)^(1/3).
 SIMULATION_BYTES_PER_PARTICLE_3D = 70.0e3
 MEASURED_N_3D = 2000
+# 3D by the iterative solver (solver=amg: no factor; the matrix, its multigrid hierarchy and the CG
+# vectors grow as N): peaks of bench.short_run_3d less its N = 500 run's libraries (~257 MB), steady flow
+# at phi 0.56: 39 kB per particle at N = 4000, 34 kB at 8000.
+SIMULATION_BYTES_PER_PARTICLE_3D_ITERATIVE = 40.0e3
 MARGIN = 1.5
 # Graphs held by the graph builder, per particle and snapshot: GRAPH_BYTES_PER_EDGE per edge of a particle
 # plus GRAPH_BYTES_PER_PARTICLE, a line just above the peaks measured at N = 2000, phi 0.76 (25 snapshots,
@@ -51,10 +55,12 @@ PREDICTION_BYTES_PER_NODE = 6.5e3
 PREDICTION_BATCH = 64  # graphs per forward pass (rheograph.learn.bundle.predict_dataset's default)
 
 
-def simulation_bytes(n_particles: int, dim: int = 2) -> float:
+def simulation_bytes(n_particles: int, dim: int = 2, iterative: bool = False) -> float:
     """Estimated peak memory [bytes] one simulation of ``n_particles`` in ``dim`` dimensions allocates
-    (state, neighbour list, resistance matrix and its sparse Cholesky factor), beyond the libraries
-    already loaded."""
+    (state, neighbour list, resistance matrix and its sparse Cholesky factor, or with ``iterative`` its
+    multigrid hierarchy), beyond the libraries already loaded."""
+    if dim == 3 and iterative:
+        return MARGIN * SIMULATION_BYTES_PER_PARTICLE_3D_ITERATIVE * n_particles
     if dim == 3:
         fill_growth = max(1.0, n_particles / MEASURED_N_3D) ** (1.0 / 3.0)
         return MARGIN * SIMULATION_BYTES_PER_PARTICLE_3D * fill_growth * n_particles
@@ -205,11 +211,11 @@ def check_memory(needed: float, what: str, smaller: str) -> None:
         )
 
 
-def check_simulation_memory(n_particles: int, dim: int = 2) -> None:
+def check_simulation_memory(n_particles: int, dim: int = 2, iterative: bool = False) -> None:
     """``check_memory`` for one simulation of ``n_particles`` (``sim.n_particles``) in ``dim``
-    dimensions."""
+    dimensions, by a direct or (``iterative``) the multigrid solver."""
     check_memory(
-        simulation_bytes(n_particles, dim),
+        simulation_bytes(n_particles, dim, iterative),
         f"a {'3D ' if dim == 3 else ''}simulation of sim.n_particles={n_particles}",
         "lower sim.n_particles",
     )

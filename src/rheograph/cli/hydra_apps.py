@@ -60,7 +60,9 @@ def checked_simulate_config(cfg: DictConfig):
 
     n_particles, dim = cfg.sim.get("n_particles"), cfg.sim.get("dim", 2)
     if isinstance(n_particles, int) and dim in (2, 3):  # else the parameter check names what is wrong
-        check_simulation_memory(n_particles, dim)  # first: checking the parameters allocates the radii
+        solver = resolve_solver_name(cfg.solver, 6 if dim == 3 else 3, n_particles)
+        # first: checking the parameters allocates the radii
+        check_simulation_memory(n_particles, dim, iterative=solver == "amg")
     params = params_from_mapping(OmegaConf.to_container(cfg.sim, resolve=True))
     params.particle_radii()  # a radii file (sim.radii=file) is read and checked here, before the run
     resolve_solver_name(cfg.solver)
