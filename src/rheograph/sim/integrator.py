@@ -34,7 +34,7 @@ from rheograph.sim.geometry import neighbour_pairs, pair_geometry, wrap_offset, 
 from rheograph.sim.init_config import initial_configuration
 from rheograph.sim.lubrication import lubrication_resistance
 from rheograph.sim.params import SimParams
-from rheograph.sim.solver import SparseSPDSolver, make_solver, resolve_solver_name
+from rheograph.sim.solver import make_solver
 from rheograph.sim.stress import pair_stress_sums, spring_stress, stress_unit_factor
 
 
@@ -333,16 +333,12 @@ class SimulationBase(ABC):
     def __init__(self, params: SimParams, state: SimState | None = None, solver="auto"):
         self.params = params
         # refused before the initial configuration or any matrix is allocated
-        name = (
-            solver.name
-            if isinstance(solver, SparseSPDSolver)
-            else resolve_solver_name(solver, self.DOF, params.n_particles)
-        )
-        check_simulation_memory(params.n_particles, dim=self.DIM, iterative=name == "amg")
+        # the solver allocates nothing before its first analysis: made first, the check counts its needs
+        self.solver = make_solver(solver, self.DOF, params.n_particles)
+        check_simulation_memory(params.n_particles, dim=self.DIM, iterative=self.solver.name == "amg")
         if state is None:
             state = self.new_state(params)
         self.state = state
-        self.solver = make_solver(solver, self.DOF, state.radii.shape[0])
         self.stress_factor = stress_unit_factor(*self.edges())
         self.list_cutoff = 2.0 * float(state.radii.max()) * (1.0 + 0.5 * params.lub_max_gap)
         self.drag = self.one_body_drag(state.radii)
