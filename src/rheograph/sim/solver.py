@@ -12,10 +12,10 @@ Backends (``SOLVERS``):
   mesh-like matrices.  Needs Debian's ``libsuitesparse-dev`` (installed by ``make install``) and the
   ``cholmod`` extra.
 * ``qdldl`` — LDLᵀ with AMD ordering from a pip wheel; works everywhere.
-* ``amg`` — conjugate gradients preconditioned by smoothed-aggregation algebraic multigrid (pyamg),
-  each solve started from the previous step's solution.  Its cost per particle does not grow with N,
-  where a 3D direct factor's does (nested-dissection separators of N^{2/3} particles): measured faster
-  than ``cholmod`` from N ~ 2000 spheres and 3-4x faster at N = 8000 (docs/validation/speed.md).  It
+* ``amg`` — conjugate gradients preconditioned by aggregation algebraic multigrid (pyamg), each solve
+  started from the previous step's solution.  Its cost per particle does not grow with N, where a 3D
+  direct factor's does (nested-dissection separators of N^{2/3} particles): measured 3x faster than
+  ``cholmod`` at N = 4000 and 8000 spheres in steady flow (docs/validation/speed.md).  It
   solves to a relative residual ``AMG_RTOL``; a solve that does not get there within ``AMG_MAX_ITERATIONS``
   is redone by the direct solver on the same matrix (counted in ``fallbacks``).
 * ``auto`` (default) — ``cholmod`` where it can be imported, else ``qdldl``; for 3D spheres from
@@ -40,7 +40,7 @@ log = logging.getLogger("rheograph")
 # the largest, a displacement error ~1e-8 a per step, far below a step's discretisation error (a run's
 # means move by ~1e-2 between disp_max 2e-3 and 1e-3); 1e-8 costs a third more (measured in steady flow)
 AMG_RTOL = 1e-6
-# a steady dense suspension takes 25-40 iterations (phi 0.56, any N measured); far more means the
+# a steady dense suspension takes 20-25 iterations (phi 0.56, any N measured); far more means the
 # hierarchy does not fit this matrix, and the direct solver is cheaper than going on
 AMG_MAX_ITERATIONS = 300
 # ``auto`` picks ``amg`` for 3D spheres from this N on (the crossover with cholmod is near N = 2000,
@@ -160,15 +160,15 @@ class DeferredAnalysis(SparseSPDSolver):
 
 
 class AMGSolver(SparseSPDSolver):
-    """Conjugate gradients preconditioned by smoothed-aggregation multigrid (pyamg), warm-started.
+    """Conjugate gradients preconditioned by aggregation multigrid (pyamg), warm-started.
 
     The matrix is handed to pyamg in blocks of one particle's ``dof_per_particle`` unknowns, with the
     rigid translations as the near-null space: lubrication and contact springs resist only relative
     motion, so a cluster of near-touching particles translating together is what the one-body drag alone
     resists, the slow mode that plain CG converges on last.  (Rigid rotations would need the positions;
     measured, they save no iteration and make each dearer.)  The hierarchy is rebuilt at each
-    ``factorize`` (a fifth to a quarter of a step; kept for two or ten steps it cost more iterations than it
-    saved).  ``solve`` starts each right-hand side column from the solution of the same column in the
+    ``factorize`` (a tenth of a step in steady flow; kept for two or ten steps it cost more iterations than
+    it saved).  ``solve`` starts each right-hand side column from the solution of the same column in the
     previous call: the integrator's columns (springs, unit-rate flow) change little from step to step.
 
     ``dof_per_particle``: 3 (discs) or 6 (spheres); ``rtol``: relative residual; a solve that misses it in
@@ -236,20 +236,29 @@ class AMGSolver(SparseSPDSolver):
         # connections when aggregating (measured: 35 against 65 iterations with them)
         self._matrix = sp.bsr_matrix((values, indices.copy(), indptr.copy()), shape=size)
         self._matrix.eliminate_zeros()
-        smoother = ("block_gauss_seidel", {"sweep": "symmetric"})
+        # two forward block Gauss-Seidel sweeps before the coarse correction and two backward after
+        # it: a symmetric V-cycle, as CG needs; measured 43 against 48 iterations of symmetric sweeps
+        # (forward then backward, each side) at the same cost per iteration
+        presmoother = ("block_gauss_seidel", {"sweep": "forward", "iterations": 2})
+        postsmoother = ("block_gauss_seidel", {"sweep": "backward", "iterations": 2})
         with warnings.catch_warnings():
             # pyamg warns when the near-null space has fewer vectors (the translations) than a block
             # has unknowns: chosen so, see the class docstring
             warnings.filterwarnings("ignore", "Having less target vectors", UserWarning)
+            # plain aggregation: the piecewise-constant translations as interpolation, neither the
+            # prolongator nor the candidates smoothed (measured in steady flow at N = 8000: a sixth of
+            # the set-up for 48 against 41 iterations of the same cost); a coarsest level of at most
+            # 100 unknowns, solved densely
             self._hierarchy = self._pyamg.smoothed_aggregation_solver(
                 self._matrix,
                 B=self._translations,
                 symmetry="symmetric",
                 strength=("symmetric", {"theta": 0.0}),
-                smooth="jacobi",
-                max_coarse=300,
-                presmoother=smoother,
-                postsmoother=smoother,
+                smooth=None,
+                improve_candidates=None,
+                max_coarse=100,
+                presmoother=presmoother,
+                postsmoother=postsmoother,
             )
         self._direct_is_current = False
         self._data = data
