@@ -101,9 +101,10 @@ def our_row(path: Path, stress: float, steady_from: float) -> dict:
     args = argparse.Namespace(**kept)
     series, cost = earlier_series(path, args)
     scheme = "Euler (lagged)" if kept["scheme"] == "euler-lagged" else "implicit"
+    solver = f", solver={kept['solver']}" if kept.get("solver", "auto") != "auto" else ""
     return {
         "code": "rheograph",
-        "scheme": f"{scheme}, {kept['disp_max']:g}",
+        "scheme": f"{scheme}, {kept['disp_max']:g}{solver}",
         "window": (steady_from, float(series["strain"][-1])),
         "steps_per_strain": cost.get("steps_per_strain"),
         "cpu_per_strain": cost.get("cpu_per_strain"),

@@ -239,7 +239,7 @@ def make_simulation(conf: dict, args) -> Simulation3D:
         ly=conf["lz"],
         lz=conf["ly"],
     )
-    return Simulation3D(params, state=state)
+    return Simulation3D(params, state=state, solver=args.solver)
 
 
 def strain_zero_check(
@@ -366,6 +366,11 @@ def main(argv=None) -> int:
         default="euler-lagged",
         help="ours: LF_DEM's scheme (explicit Euler, lagged step control) or the default implicit one",
     )
+    ap.add_argument(
+        "--solver",
+        default="auto",
+        help="our linear solver (rheograph.sim.solver): auto, cholmod, qdldl or amg",
+    )
     ap.add_argument("--lfdem-disp-max", type=float, help="the LF_DEM run compared with (default: --disp-max)")
     ap.add_argument("--strain", type=float, default=0.0, help="0: the strain-0 check only")
     ap.add_argument("--steady", type=float, default=1.0, help="steady window starts at this strain")
@@ -488,14 +493,14 @@ def main(argv=None) -> int:
     return 1 if problems else 0
 
 
-SETTINGS = ("stress", "control", "rate", "disp_max", "scheme")
+SETTINGS = ("stress", "control", "rate", "disp_max", "scheme", "solver")
 
 
 def settings(args) -> dict:
     """The options an earlier run of ours must share to be compared again (``--ours``), with the start
     it ran from (reports written before ``--configuration`` existed ran from ``CONF``)."""
     return {
-        **{key: getattr(args, key) for key in SETTINGS},
+        **{key: getattr(args, key, "auto") if key == "solver" else getattr(args, key) for key in SETTINGS},
         "configuration": getattr(args, "configuration", CONF),
     }
 
@@ -509,7 +514,7 @@ def earlier_series(path: Path, args) -> tuple[dict, dict]:
         raise SystemExit(
             f"--ours {path}: not the --json of an earlier run of ours with a strain > 0 ({exc})"
         ) from None
-    kept = {"configuration": CONF, **kept}
+    kept = {"configuration": CONF, "solver": "auto", **kept}  # reports before --solver ran by auto
     if kept != settings(args):
         raise SystemExit(f"--ours {path}: made with {kept}, not the settings asked for, {settings(args)}")
     return {key: np.asarray(values, dtype=np.float64) for key, values in series.items()}, cost

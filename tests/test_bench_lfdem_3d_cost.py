@@ -53,3 +53,27 @@ def test_the_table_names_the_start_it_was_run_from():
     assert "(N = 2000, φ = 0.56)" in text and "not yet steady" in text
     with pytest.raises(SystemExit, match="--configuration .*: not found"):
         bench.main(["--stress", "10", "--configuration", "missing.dat", "--no-write"])
+
+
+
+def test_a_row_of_another_solver_says_which(tmp_path):
+    """The committed N = 2000 runs of ours by the default solver (reports from before ``--solver``: they
+    ran by ``auto``) and by ``solver=amg``: the same steps per strain and means to the multigrid's
+    tolerance, the multigrid row labelled with its solver; an amg report is not read as the default's."""
+    bench = load_bench_script("lfdem_3d_cost")
+    ours = bench.REFERENCE.parent / "phi0.56_n2000" / "rheograph"
+    direct = bench.our_row(ours / "ours_s10_implicit1e-3.json", 10.0, 0.05)
+    multigrid = bench.our_row(ours / "ours_s10_implicit1e-3_amg.json", 10.0, 0.05)
+    assert direct["scheme"] == "implicit, 0.001" and multigrid["scheme"] == "implicit, 0.001, solver=amg"
+    assert multigrid["steps_per_strain"] == pytest.approx(direct["steps_per_strain"], rel=1e-4)
+    for key in ("viscosity", "pressure_over_sigma", "z_mu"):
+        assert multigrid["steady"][key] == pytest.approx(direct["steady"][key], rel=1e-4), key
+    report = json.loads((ours / "ours_s10_implicit1e-3_amg.json").read_text())
+    report["settings"]["solver"] = "auto"
+    relabelled = tmp_path / "relabelled.json"
+    relabelled.write_text(json.dumps(report))
+    assert bench.our_row(relabelled, 10.0, 0.05)["scheme"] == "implicit, 0.001"
+    vs = load_bench_script("vs_lfdem_3d")
+    args = vs.argparse.Namespace(**{**report["settings"], "solver": "amg"})
+    with pytest.raises(SystemExit, match="not the settings asked for"):
+        vs.earlier_series(relabelled, args)
