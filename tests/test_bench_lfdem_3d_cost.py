@@ -55,7 +55,6 @@ def test_the_table_names_the_start_it_was_run_from():
         bench.main(["--stress", "10", "--configuration", "missing.dat", "--no-write"])
 
 
-
 def test_a_row_of_another_solver_says_which(tmp_path):
     """The committed N = 2000 runs of ours by the default solver (reports from before ``--solver``: they
     ran by ``auto``) and by ``solver=amg``: the same steps per strain and means to the multigrid's
