@@ -101,10 +101,12 @@ def our_row(path: Path, stress: float, steady_from: float) -> dict:
     args = argparse.Namespace(**kept)
     series, cost = earlier_series(path, args)
     scheme = "Euler (lagged)" if kept["scheme"] == "euler-lagged" else "implicit"
-    solver = f", solver={kept['solver']}" if kept.get("solver", "auto") != "auto" else ""
+    # the solver that ran: reports name it; earlier ones ran by auto, which was the direct solver at
+    # every N they ran (N <= 2000 before auto took the multigrid solver from N = 2000)
+    solver = cost.get("solver") or (kept.get("solver") if kept.get("solver", "auto") != "auto" else "cholmod")
     return {
         "code": "rheograph",
-        "scheme": f"{scheme}, {kept['disp_max']:g}{solver}",
+        "scheme": f"{scheme}, {kept['disp_max']:g}, {solver}",
         "window": (steady_from, float(series["strain"][-1])),
         "steps_per_strain": cost.get("steps_per_strain"),
         "cpu_per_strain": cost.get("cpu_per_strain"),
@@ -124,7 +126,7 @@ def section(stress: float, start: dict, steady_from: float, rows: list[dict], co
         "time over the steps after strain 0.05):",
         "",
     )
-    header = ["code", "scheme, disp_max", "steady window", "steps per strain", "CPU s per strain"]
+    header = ["code", "scheme, disp_max, solver", "steady window", "steps per strain", "CPU s per strain"]
     header += [label for _, label in QUANTITIES]
     cells = []
     for row in rows:

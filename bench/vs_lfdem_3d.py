@@ -337,7 +337,7 @@ def run_ours(sim: Simulation3D, args, n: int) -> tuple[dict, dict]:
         z_mu=a[:, 5],
         shear_stress=a[:, 6],
     )
-    cost = dict(cpu_total=cpu1 - t_start, steps=s.steps, strain=s.strain)
+    cost = dict(cpu_total=cpu1 - t_start, steps=s.steps, strain=s.strain, solver=sim.solver.name)
     if cpu0 is not None and s.strain > strain0:
         cost.update(
             cpu_per_strain=(cpu1 - cpu0) / (s.strain - strain0),

@@ -339,7 +339,7 @@ def test_the_memory_estimate_of_a_3d_run_is_its_own(monkeypatch):
 
 
 def test_a_large_3d_simulation_is_sized_for_the_solver_auto_picks(monkeypatch):
-    """solver=auto takes the multigrid solver for 3D systems from N = 4000, so the memory check before a
+    """solver=auto takes the multigrid solver for 3D systems from N = 2000, so the memory check before a
     run counts its memory, not a sparse factor's; a forced direct solver is counted as one."""
     from rheograph.sim.integrator3d import Simulation3D
 

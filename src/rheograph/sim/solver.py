@@ -14,8 +14,8 @@ Backends (``SOLVERS``):
 * ``qdldl`` — LDLᵀ with AMD ordering from a pip wheel; works everywhere.
 * ``amg`` — conjugate gradients preconditioned by aggregation algebraic multigrid (pyamg), each solve
   started from the previous step's solution.  Its cost per particle does not grow with N, where a 3D
-  direct factor's does (nested-dissection separators of N^{2/3} particles): measured 3x faster than
-  ``cholmod`` at N = 4000 and 8000 spheres in steady flow (docs/validation/speed.md).  It
+  direct factor's does (nested-dissection separators of N^{2/3} particles): measured faster than
+  ``cholmod`` from N = 2000 spheres and 3.5x faster at N = 8000 in steady flow (docs/validation/speed.md).  It
   solves to a relative residual ``AMG_RTOL``; a solve that does not get there within ``AMG_MAX_ITERATIONS``
   is redone by the direct solver on the same matrix (counted in ``fallbacks``).
 * ``auto`` (default) — ``cholmod`` where it can be imported, else ``qdldl``; for 3D spheres from
@@ -43,9 +43,9 @@ AMG_RTOL = 1e-6
 # a steady dense suspension takes 20-25 iterations (phi 0.56, any N measured); far more means the
 # hierarchy does not fit this matrix, and the direct solver is cheaper than going on
 AMG_MAX_ITERATIONS = 300
-# ``auto`` picks ``amg`` for 3D spheres from this N on (the crossover with cholmod is near N = 2000,
-# docs/validation/speed.md; below this, the direct solver's exactness is kept)
-AMG_AUTO_PARTICLES = 4000
+# ``auto`` picks ``amg`` for 3D spheres from this N on (steady flow: cholmod 1.6x cheaper at N = 1000, amg
+# 17 % cheaper at 2000; docs/validation/speed.md); below this, the direct solver's exactness is kept
+AMG_AUTO_PARTICLES = 2000
 # per-particle degrees of freedom -> dimension: (U_x, U_y, w_z) for discs, (U, w) for spheres
 _DIMENSION_OF_DOF = {3: 2, 6: 3}
 
