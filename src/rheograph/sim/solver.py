@@ -263,13 +263,22 @@ class AMGSolver(SparseSPDSolver):
         self._direct_is_current = False
         self._data = data
 
+    def preconditioner(self):
+        """One V-cycle of the current hierarchy as a linear operator (ndof x ndof): what CG applies to
+        each residual; symmetric positive definite, as CG requires."""
+        return self._hierarchy.aspreconditioner(cycle="V")
+
+    def levels(self) -> int:
+        """Levels of the current hierarchy (1: the matrix is solved densely, no coarse correction)."""
+        return len(self._hierarchy.levels)
+
     def solve(self, rhs):
         from scipy.sparse.linalg import cg
 
         columns = rhs[:, None] if rhs.ndim == 1 else rhs
         if self._previous is None or self._previous.shape != columns.shape:
             self._previous = np.zeros(columns.shape)
-        preconditioner = self._hierarchy.aspreconditioner(cycle="V")
+        preconditioner = self.preconditioner()
         solution = np.empty(columns.shape)
         self.iterations = []
         for k in range(columns.shape[1]):
