@@ -98,7 +98,7 @@ def our_row(path: Path, stress: float, steady_from: float) -> dict:
     kept = report.get("settings", {})
     if kept.get("stress") != stress or kept.get("control") != "stress":
         raise SystemExit(f"--ours {path}: a run at {kept}, not stress control at σ/σ0 = {stress:g}")
-    args = argparse.Namespace(**kept)
+    args = argparse.Namespace(**{"solver": "auto", **kept})  # reports before --solver ran by auto
     series, cost = earlier_series(path, args)
     scheme = "Euler (lagged)" if kept["scheme"] == "euler-lagged" else "implicit"
     # the solver that ran: reports name it; earlier ones ran by auto, which was the direct solver at

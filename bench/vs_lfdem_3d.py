@@ -369,7 +369,8 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--solver",
         default="auto",
-        help="our linear solver (rheograph.sim.solver): auto, cholmod, qdldl or amg",
+        choices=("auto", "cholmod", "qdldl", "amg"),
+        help="our linear solver (rheograph.sim.solver)",
     )
     ap.add_argument("--lfdem-disp-max", type=float, help="the LF_DEM run compared with (default: --disp-max)")
     ap.add_argument("--strain", type=float, default=0.0, help="0: the strain-0 check only")
@@ -500,7 +501,7 @@ def settings(args) -> dict:
     """The options an earlier run of ours must share to be compared again (``--ours``), with the start
     it ran from (reports written before ``--configuration`` existed ran from ``CONF``)."""
     return {
-        **{key: getattr(args, key, "auto") if key == "solver" else getattr(args, key) for key in SETTINGS},
+        **{key: getattr(args, key) for key in SETTINGS},
         "configuration": getattr(args, "configuration", CONF),
     }
 

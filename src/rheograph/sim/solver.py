@@ -167,9 +167,10 @@ class AMGSolver(SparseSPDSolver):
     motion, so a cluster of near-touching particles translating together is what the one-body drag alone
     resists, the slow mode that plain CG converges on last.  (Rigid rotations would need the positions;
     measured, they save no iteration and make each dearer.)  The hierarchy is rebuilt at each
-    ``factorize`` (a tenth of a step in steady flow; kept for two or ten steps it cost more iterations than
-    it saved).  ``solve`` starts each right-hand side column from the solution of the same column in the
-    previous call: the integrator's columns (springs, unit-rate flow) change little from step to step.
+    ``factorize`` (a tenth of a step in steady flow; a smoothed-aggregation hierarchy kept for two or ten
+    steps cost more iterations than it saved).  ``solve`` starts each right-hand side column from the
+    solution of the same column in the previous call: the integrator's columns (springs, unit-rate flow)
+    change little from step to step.
 
     ``dof_per_particle``: 3 (discs) or 6 (spheres); ``rtol``: relative residual; a solve that misses it in
     ``max_iterations`` is redone by the direct solver (``fallbacks`` counts them).
