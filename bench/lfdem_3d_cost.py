@@ -1,7 +1,7 @@
 """Cost against accuracy in 3D, side by side with LF_DEM: CPU per unit strain and the steady means of each
 run from LF_DEM's start (N = 500, φ = 0.56) at one stress, LF_DEM at its step(s) and ours at LF_DEM's
-scheme and at the default implicit scheme, so that the cost at LF_DEM's discretisation and at equal
-accuracy can be read off one table.
+scheme and at the default implicit scheme (with or without elastic unloading), so that the cost at
+LF_DEM's discretisation and at equal accuracy can be read off one table.
 
     python -m bench.lfdem_3d_cost --stress 200 --lfdem s200_disp1e-3 s200_disp5e-4 \\
         --ours data/lfdem_reference_3d/phi0.56_n500/rheograph/s200_*.json
@@ -29,6 +29,7 @@ from bench.publishing import Section, command_line, publish
 from bench.vs_lfdem_3d import (
     CONF,
     REFERENCE,
+    SCHEME_LABELS,
     earlier_series,
     lfdem_series,
     read_configuration,
@@ -84,7 +85,7 @@ def lfdem_row(reference: Path, run: str, stress: float, steady_from: float, cpu:
     entry = cpu.get(run)
     return {
         "code": "LF_DEM",
-        "scheme": f"Euler (lagged), {disp}",
+        "scheme": f"{SCHEME_LABELS['euler-lagged']}, {disp}",
         "window": (steady_from, end),
         "steps_per_strain": lfdem_steps_per_strain(data_path, (steady_from, end)),
         "cpu_per_strain": entry["cpu_per_strain"] if entry else None,
@@ -100,7 +101,7 @@ def our_row(path: Path, stress: float, steady_from: float) -> dict:
         raise SystemExit(f"--ours {path}: a run at {kept}, not stress control at σ/σ0 = {stress:g}")
     args = argparse.Namespace(**{"solver": "auto", **kept})  # reports before --solver ran by auto
     series, cost = earlier_series(path, args)
-    scheme = "Euler (lagged)" if kept["scheme"] == "euler-lagged" else "implicit"
+    scheme = SCHEME_LABELS[kept["scheme"]]
     # the solver that ran: reports name it; earlier ones ran by auto, which was the direct solver at
     # every N they ran (N <= 2000 before auto took the multigrid solver from N = 2000)
     solver = cost.get("solver") or (kept.get("solver") if kept.get("solver", "auto") != "auto" else "cholmod")

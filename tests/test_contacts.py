@@ -5,7 +5,7 @@ import pytest
 from conftest import sheared_frictional_problem
 
 from rheograph.sim import contacts
-from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK
+from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK, UNLOADING
 
 KN, KT, MU = 1000.0, 500.0, 0.5
 RADII = np.array([1.0, 1.4])
@@ -25,10 +25,10 @@ def nearest_image_vector(state, i, j):
     return min((x - state.positions[i] for x in images), key=np.linalg.norm)
 
 
-def clm(overlap, stretch_t, stretch_n=0.0):
+def clm(overlap, stretch_t, stretch_n=0.0, state=NONE):
     xi = np.array([-overlap / ABAR])
     stretch = np.array([[stretch_n, stretch_t]])
-    state = np.zeros(1, dtype=np.int8)
+    state = np.array([state], dtype=np.int8)
     nf = contacts.critical_load_update(RADII, PI, PJ, NVEC, xi, stretch, state, KN, KT, MU, 1.0)
     return nf, state[0], stretch[0]
 
@@ -55,6 +55,42 @@ def test_beyond_the_bound_slides_and_is_rescaled_onto_it():
     assert (nf, state) == (1, SLIDE)
     assert KT * ABAR * np.abs(stretch[1]) == pytest.approx(MU * (3.0 - 1.0))
     assert stretch[1] < 0  # direction kept
+
+
+@pytest.mark.parametrize("before", [NONE, STICK, SLIDE])
+def test_an_unloading_contact_beyond_the_bound_sticks_on_it_and_no_other_does(before):
+    """Elastic unloading: a sliding contact whose stretch the last step turned back (UNLOADING) sticks on
+    the Coulomb bound, where any other state beyond the bound slides; within the bound both stick, below
+    the critical load both lose their memory."""
+    overlap = 3.0 / (KN * ABAR)  # capacity mu (3 - 1) = 1
+    big = 4.0 / (KT * ABAR)
+    nf, unloading, stretch = clm(overlap, -big, state=UNLOADING)
+    assert (nf, unloading) == (1, STICK)
+    assert KT * ABAR * stretch[1] == pytest.approx(-MU * (3.0 - 1.0))  # on the bound, direction kept
+    assert clm(overlap, -big, state=before)[1] == SLIDE
+    assert clm(overlap, 0.5 / (KT * ABAR), state=UNLOADING)[1] == STICK
+    assert clm(0.5 / (KN * ABAR), big, state=UNLOADING)[1] == FRICTIONLESS
+
+
+@pytest.mark.parametrize("elastic_unloading", [False, True])
+def test_only_a_sliding_contact_whose_sliding_opposes_its_stretch_is_marked_unloading(elastic_unloading):
+    """increment_stretch marks UNLOADING exactly the SLIDE contacts whose sliding velocity points against
+    their stretch, and only with elastic_unloading; the stretch increment itself is the same."""
+    nvec = np.array([[1.0, 0.0]])  # tangent (0, 1)
+    dy = np.array([0.0])
+    dt = 1e-3
+    for state, sliding, marked in [
+        (SLIDE, -0.3, True),  # against the stretch (+y): unloading
+        (SLIDE, +0.3, False),  # along it: still loading
+        (STICK, -0.3, False),  # a stuck contact is held by its spring already
+        (FRICTIONLESS, -0.3, False),
+    ]:
+        vel = np.array([0.0, 0.0, 0.0, 0.0, sliding, 0.0])  # j slides along +/- y
+        states = np.array([state], dtype=np.int8)
+        stretch = np.array([[0.0, 2e-4]])
+        contacts.increment_stretch(vel, RADII, PI, PJ, nvec, dy, states, stretch, 0.0, dt, elastic_unloading)
+        np.testing.assert_allclose(stretch[0], [0.0, 2e-4 + sliding * dt], rtol=1e-14)
+        assert states[0] == (UNLOADING if marked and elastic_unloading else state)
 
 
 def test_separation_clears_the_contact():
@@ -222,7 +258,7 @@ def test_stretch_grows_with_the_sliding_of_the_contact_point(theta):
         stretch = np.full((1, 2), 0.25)
         dy = np.array([r * n[1]])
         contacts.increment_stretch(
-            vel, RADII, PI, PJ, nvec, dy, np.array([state], dtype=np.int8), stretch, shear_rate, dt
+            vel, RADII, PI, PJ, nvec, dy, np.array([state], dtype=np.int8), stretch, shear_rate, dt, False
         )
         return stretch[0] - 0.25
 

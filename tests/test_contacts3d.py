@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rheograph.sim import contacts, contacts3d
-from rheograph.sim.contacts3d import FRICTIONLESS, NONE, SLIDE, STICK
+from rheograph.sim.contacts3d import FRICTIONLESS, NONE, SLIDE, STICK, UNLOADING
 from rheograph.sim.geometry3d import pair_geometry
 
 KN, KT, MU = 1000.0, 500.0, 0.5
@@ -93,7 +93,7 @@ def test_sliding_velocity_of_rigid_motion_and_of_a_tangential_slide(overlap):
     np.testing.assert_allclose(v, 0.8 * t, atol=1e-14)
     stretch = np.zeros((1, 3))  # the step integrates that velocity into the stretch
     contacts3d.increment_stretch(
-        slide, RADII, PI, PJ, N0[None, :], dy, np.array([STICK], np.int8), stretch, 0.0, 0.01
+        slide, RADII, PI, PJ, N0[None, :], dy, np.array([STICK], np.int8), stretch, 0.0, 0.01, False
     )
     np.testing.assert_allclose(stretch[0], 0.008 * t, atol=1e-16)
 
@@ -137,7 +137,7 @@ def test_stretch_stays_tangent_and_turns_with_a_rolling_pair():
         centre = pos.mean(axis=0)
         w = omega * e
         vel = np.r_[np.cross(w, pos[0] - centre), w, np.cross(w, pos[1] - centre), w]
-        contacts3d.increment_stretch(vel, RADII, PI, PJ, n, dy, state, stretch, 0.0, dt)
+        contacts3d.increment_stretch(vel, RADII, PI, PJ, n, dy, state, stretch, 0.0, dt, False)
         pos = centre + rot.apply(pos - centre)
     n, _, _, _ = pair_geometry(pos, RADII, PI, PJ, big, big, big, 0.0)
     contacts3d.critical_load_update(RADII, PI, PJ, n, xi, stretch, state, KN, KT, MU, 1.0)
@@ -149,9 +149,11 @@ def test_stretch_stays_tangent_and_turns_with_a_rolling_pair():
     np.testing.assert_allclose(stretch[0], Rotation.from_rotvec(theta * e).apply(s0), atol=1e-3 * 1e-4)
 
 
-def test_planar_contacts_reduce_to_the_2d_kernels():
+@pytest.mark.parametrize("elastic_unloading", [False, True])
+def test_planar_contacts_reduce_to_the_2d_kernels(elastic_unloading):
     """Contacts in the plane z = 0 with in-plane stretches and motion: the CLM, the spring forces and
-    torque about z, and the stretch increment are the 2D kernels', with nothing out of the plane."""
+    torque about z, the stretch increment and (with elastic unloading) the sliding contacts it marks
+    unloading are the 2D kernels', with nothing out of the plane."""
     rng = np.random.default_rng(2)
     m = 6
     radii = np.array([1.0, 1.4, 1.0, 1.4, 1.0, 1.4, 1.0])
@@ -179,7 +181,11 @@ def test_planar_contacts_reduce_to_the_2d_kernels():
     vel3 = np.zeros((7, 6))
     vel3[:, [0, 1, 5]] = vel2.reshape(-1, 3)
     dy = rng.normal(size=m)
-    contacts.increment_stretch(vel2, radii, pi, pj, n2, dy, st2, s2, 0.7, 0.01)
-    contacts3d.increment_stretch(vel3.ravel(), radii, pi, pj, n3, dy, st3, s3, 0.7, 0.01)
+    # the sliding contact's stretch against its sliding velocity: it unloads
+    if np.dot(contacts.sliding_velocity(vel2, radii, pi, pj, n2, dy, 0.7, 1), s2[1]) > 0.0:
+        s2[1], s3[1] = -s2[1], -s3[1]
+    contacts.increment_stretch(vel2, radii, pi, pj, n2, dy, st2, s2, 0.7, 0.01, elastic_unloading)
+    contacts3d.increment_stretch(vel3.ravel(), radii, pi, pj, n3, dy, st3, s3, 0.7, 0.01, elastic_unloading)
     np.testing.assert_allclose(s3[:, :2], s2, rtol=1e-12, atol=1e-16)
     assert np.all(s3[:, 2] == 0.0)
+    assert np.array_equal(st2, st3) and (UNLOADING in st3) == elastic_unloading

@@ -242,3 +242,19 @@ def test_flow_curves_keep_runs_of_other_radii_apart(tmp_path):
     rows = markdown_table(points).splitlines()
     assert any(row.startswith("| 64 (polydisperse 0.1) |") for row in rows)
     assert any(row.startswith("| 64 |") for row in rows)
+
+
+def test_elastic_unloading_is_stored_named_and_never_resumes_a_run_without_it(tmp_path):
+    """Elastic unloading is another scheme: its runs carry it in their params and name, and a file run
+    without it (which stores nothing for it) is refused rather than continued with it."""
+    params = SimParams(**{**TINY, "elastic_unloading": True})
+    assert run_name(params) == "N64_phi0.74_s5_seed1_d0.002_implicit_unloading"
+    with_it, without = tmp_path / "with.h5", tmp_path / "without.h5"
+    run_state_point(params, with_it, progress=False, solver="qdldl")
+    assert read_params(with_it)["elastic_unloading"] is True
+    assert params_from_mapping(read_params(with_it)) == params
+    run_state_point(SimParams(**TINY), without, progress=False, solver="qdldl")
+    assert "elastic_unloading" not in read_params(without)
+    with pytest.raises(InputError, match=r"belongs to another state point \(.*elastic_unloading"):
+        extended = SimParams(**{**TINY, "strain": 0.06, "elastic_unloading": True})
+        run_state_point(extended, without, progress=False)

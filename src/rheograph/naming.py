@@ -31,12 +31,14 @@ def sim_id(
     radii="bidisperse",
     polydispersity=0.0,
     radii_file="",
+    elastic_unloading=False,
 ) -> str:
     """Directory name of a state point, e.g. N400_phi0.76_s10_seed1_d0.001_euler (``_lagged`` appended
-    with LF_DEM's lagged step control); a 3D run's ends in ``_3d`` and, under rate control, names its
-    imposed rate after the stress that scales its springs: N500_phi0.5_s10_rate0.1_seed1_d0.002_implicit_3d
-    (2D as well); radii other than bidisperse follow: ``_poly0.05`` (``radii=polydisperse``) or
-    ``_radii-<file stem>`` (``radii=file``), e.g. N400_phi0.76_s10_poly0.05_seed1_d0.002_implicit.
+    with LF_DEM's lagged step control, ``_unloading`` with elastic unloading of sliding contacts); a 3D
+    run's ends in ``_3d`` and, under rate control, names its imposed rate after the stress that scales its
+    springs: N500_phi0.5_s10_rate0.1_seed1_d0.002_implicit_3d (2D as well); radii other than bidisperse
+    follow: ``_poly0.05`` (``radii=polydisperse``) or ``_radii-<file stem>`` (``radii=file``), e.g.
+    N400_phi0.76_s10_poly0.05_seed1_d0.002_implicit.
     """
 
     def text(v):  # a value that is not a number still names a directory: SimParams refuses it afterwards
@@ -50,6 +52,7 @@ def sim_id(
         rate += f"_radii-{PurePath(str(radii_file)).stem}"
     name = f"N{n_particles}_phi{phi}_s{stress}{rate}_seed{seed}_d{disp_max}_{integrator}"
     name += "_lagged" if lagged_step_control else ""
+    name += "_unloading" if elastic_unloading is True else ""
     return name + "_3d" if dim == 3 else name
 
 
@@ -69,4 +72,5 @@ def run_name(params) -> str:
         params.radii,
         params.polydispersity,
         params.radii_file,
+        params.elastic_unloading,
     )

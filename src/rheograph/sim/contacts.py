@@ -5,7 +5,17 @@ xi <= 0.  The normal spring is F_n = k_n a_bar overlap; the tangential spring is
 where the stretch vector (P, 2) accumulates the relative sliding displacement of j's surface with respect
 to i's at the contact point.
 
-Contact states (int8): NONE (not touching), FRICTIONLESS (F_n < F_CL), STICK, SLIDE.
+Contact states (int8): NONE (not touching), FRICTIONLESS (F_n < F_CL), STICK, SLIDE, and UNLOADING: a
+sliding contact whose stretch the last step's sliding velocity turned back (``increment_stretch`` with
+``elastic_unloading``), held only from the move to the next CLM update, which makes it stick.
+
+Elastic unloading.  LF_DEM decides stick or slide by the magnitude of the stretch alone.  A sliding contact
+exerts its Coulomb force explicitly; when that force spins a weakly held particle, the sliding velocity can
+overshoot through zero within one step, and the stretch lands beyond the bound on the other side: the
+contact slides back, and the pair flips every step (period-2 chatter, whose speed then bounds dt).  In the
+continuous dynamics the tangential load of a contact whose sliding reverses first falls elastically: the
+contact sticks.  With ``elastic_unloading`` the CLM update makes such a contact stick, with its stretch on
+the bound, so that the implicit integrator's spring takes it over at the next step.
 """
 
 import numpy as np
@@ -15,6 +25,7 @@ NONE = 0
 FRICTIONLESS = 1
 STICK = 2
 SLIDE = 3
+UNLOADING = 4
 
 
 @njit(cache=True)
@@ -26,7 +37,8 @@ def critical_load_update(radii, pair_i, pair_j, nvec, xi, stretch, state, kn, kt
     current tangent (plane); if the normal spring force is below the critical load the contact is
     frictionless and the stretch is reset (the CLM's loss of frictional memory); otherwise the tangential
     force is bounded by mu (F_n - F_CL): beyond it the contact slides and the stretch is rescaled onto the
-    bound.  Returns the number of frictional (stick or slide) contacts.
+    bound, except that a contact marked UNLOADING sticks there (elastic unloading, module docstring).
+    Returns the number of frictional (stick or slide) contacts.
     """
     dim = nvec.shape[1]
     n_frictional = 0
@@ -57,7 +69,7 @@ def critical_load_update(radii, pair_i, pair_j, nvec, xi, stretch, state, kn, kt
             scale = capacity / f_tan
             for c in range(dim):
                 stretch[p, c] *= scale
-            state[p] = SLIDE
+            state[p] = STICK if state[p] == UNLOADING else SLIDE
         else:
             state[p] = STICK
     return n_frictional
@@ -142,13 +154,19 @@ def max_interaction_speed(vel, radii, pair_i, pair_j, nvec, dy, active, state, s
 
 
 @njit(cache=True)
-def increment_stretch(vel, radii, pair_i, pair_j, nvec, dy, state, stretch, shear_rate, dt):
+def increment_stretch(
+    vel, radii, pair_i, pair_j, nvec, dy, state, stretch, shear_rate, dt, elastic_unloading
+):
     """Advance the tangential stretch of every contact by (sliding velocity) * dt, before positions move.
 
     Frictionless contacts accumulate too; the CLM check at the next geometry resets them if F_n < F_CL.
+    With ``elastic_unloading`` a sliding contact whose sliding velocity opposes its stretch is marked
+    UNLOADING (module docstring).
     """
     for p in range(pair_i.shape[0]):
         if state[p] != NONE:
             sx, sy = sliding_velocity(vel, radii, pair_i, pair_j, nvec, dy, shear_rate, p)
+            if elastic_unloading and state[p] == SLIDE and sx * stretch[p, 0] + sy * stretch[p, 1] < 0.0:
+                state[p] = UNLOADING
             stretch[p, 0] += sx * dt
             stretch[p, 1] += sy * dt

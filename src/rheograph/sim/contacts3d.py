@@ -1,21 +1,22 @@
 """Frictional contacts between spheres in 3D: linear springs, Critical Load Model (CLM), Coulomb sliding.
 
-Units, states (NONE, FRICTIONLESS, STICK, SLIDE) and the CLM update ``critical_load_update`` (on stretches
-of any length) are ``rheograph.sim.contacts``'s: forces in F_CL, lengths in a.  The tangential stretch is
-a 3-vector per pair (P, 3): the relative sliding displacement of j's surface with respect to i's at the
-contact point.  It is advanced with the sliding velocity (already tangent) before the particles move, and
-after they move it is projected onto the plane normal to the new n, as LF_DEM does: no rigid rotation with
-the pair, so |stretch| loses a second-order amount when the pair rolls, and the stretch stays fixed in the
-lab frame when the pair spins about n.  There is no twisting or rolling spring.
+Units, states (NONE, FRICTIONLESS, STICK, SLIDE, UNLOADING), elastic unloading and the CLM update
+``critical_load_update`` (on stretches of any length) are ``rheograph.sim.contacts``'s: forces in F_CL,
+lengths in a.  The tangential stretch is a 3-vector per pair (P, 3): the relative sliding displacement of
+j's surface with respect to i's at the contact point.  It is advanced with the sliding velocity (already
+tangent) before the particles move, and after they move it is projected onto the plane normal to the new
+n, as LF_DEM does: no rigid rotation with the pair, so |stretch| loses a second-order amount when the pair
+rolls, and the stretch stays fixed in the lab frame when the pair spins about n.  There is no twisting or
+rolling spring.
 
-Degrees of freedom per particle: 6, ordered [U (3), w (3)] (non-affine); the affine flow at shear rate
-g is U = g y e_x and w = -g/2 e_z.
+Degrees of freedom per particle: 6, ordered [U (3), w (3)] (non-affine); the affine flow at shear rate g
+is U = g y e_x and w = -g/2 e_z.
 """
 
 import numpy as np
 from numba import njit
 
-from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK, critical_load_update
+from rheograph.sim.contacts import FRICTIONLESS, NONE, SLIDE, STICK, UNLOADING, critical_load_update
 
 
 @njit(cache=True)
@@ -117,12 +118,21 @@ def max_interaction_speed(vel, radii, pair_i, pair_j, nvec, dy, active, state, s
 
 
 @njit(cache=True)
-def increment_stretch(vel, radii, pair_i, pair_j, nvec, dy, state, stretch, shear_rate, dt):
+def increment_stretch(
+    vel, radii, pair_i, pair_j, nvec, dy, state, stretch, shear_rate, dt, elastic_unloading
+):
     """Advance the tangential stretch (P, 3) of every contact by (sliding velocity) * dt, with the
-    geometry and Lees–Edwards images of the start of the step, before positions move."""
+    geometry and Lees–Edwards images of the start of the step, before positions move; with
+    ``elastic_unloading`` a sliding contact whose sliding velocity opposes its stretch is marked UNLOADING."""
     for p in range(pair_i.shape[0]):
         if state[p] != NONE:
             s0, s1, s2 = sliding_velocity(vel, radii, pair_i, pair_j, nvec, dy, shear_rate, p)
+            if (
+                elastic_unloading
+                and state[p] == SLIDE
+                and s0 * stretch[p, 0] + s1 * stretch[p, 1] + s2 * stretch[p, 2] < 0.0
+            ):
+                state[p] = UNLOADING
             stretch[p, 0] += s0 * dt
             stretch[p, 1] += s1 * dt
             stretch[p, 2] += s2 * dt
@@ -133,6 +143,7 @@ __all__ = [
     "NONE",
     "SLIDE",
     "STICK",
+    "UNLOADING",
     "contact_spring_forces",
     "critical_load_update",
     "increment_stretch",

@@ -293,13 +293,17 @@ def _advance(
     stretch,
     shear_rate,
     dt,
+    elastic_unloading,
     lx,
     ly,
     le_offset,
 ):
-    """Move by dt: contact stretches, positions (affine + non-affine), Lees-Edwards offset, wrapping.
-    Returns (largest non-affine displacement since the list was built, new offset)."""
-    contacts.increment_stretch(vel, radii, pair_i, pair_j, nvec, dy, contact_state, stretch, shear_rate, dt)
+    """Move by dt: contact stretches (sliding contacts that unload marked, with ``elastic_unloading``),
+    positions (affine + non-affine), Lees-Edwards offset, wrapping.  Returns (largest non-affine
+    displacement since the list was built, new offset)."""
+    contacts.increment_stretch(
+        vel, radii, pair_i, pair_j, nvec, dy, contact_state, stretch, shear_rate, dt, elastic_unloading
+    )
     max_displacement = move(positions, vel, displacement, shear_rate, dt)
     le_offset = wrap_offset(le_offset + shear_rate * ly * dt, lx)
     wrap_positions(positions, lx, ly, le_offset)
@@ -386,7 +390,7 @@ class SimulationBase(ABC):
         s = self.state
         self.max_displacement, s.le_offset = self.advance_kernel(
             s.positions, s.displacement, vel, s.radii, s.pair_i, s.pair_j, lp.nvec, lp.dy, s.contact_state,
-            s.stretch, shear_rate, dt, *self.edges(), s.le_offset,
+            s.stretch, shear_rate, dt, self.params.elastic_unloading, *self.edges(), s.le_offset,
         )  # fmt: skip
 
     def solve_configuration(self, passes: int = 2) -> StepResult:

@@ -113,12 +113,14 @@ def linear_problem(
 @njit(cache=True)
 def _advance(
     positions, displacement, vel, radii, pair_i, pair_j, nvec, dy, contact_state, stretch, shear_rate, dt,
-    lx, ly, lz, le_offset,
+    elastic_unloading, lx, ly, lz, le_offset,
 ):  # fmt: skip
-    """Move by dt: contact stretches (with the pre-move geometry), positions (affine + non-affine), the
-    Lees–Edwards offset, wrapping.  Returns (largest non-affine displacement since the list was built,
-    new offset)."""
-    contacts3d.increment_stretch(vel, radii, pair_i, pair_j, nvec, dy, contact_state, stretch, shear_rate, dt)
+    """Move by dt: contact stretches (with the pre-move geometry; sliding contacts that unload marked, with
+    ``elastic_unloading``), positions (affine + non-affine), the Lees–Edwards offset, wrapping.  Returns
+    (largest non-affine displacement since the list was built, new offset)."""
+    contacts3d.increment_stretch(
+        vel, radii, pair_i, pair_j, nvec, dy, contact_state, stretch, shear_rate, dt, elastic_unloading
+    )
     max_displacement = move(positions, vel, displacement, shear_rate, dt)
     le_offset = wrap_offset(le_offset + shear_rate * ly * dt, lx)
     wrap_positions(positions, lx, ly, lz, le_offset)

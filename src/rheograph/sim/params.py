@@ -76,11 +76,12 @@ class SimParams:
     radii: str = "bidisperse"  # "bidisperse" (1 : size_ratio), "polydisperse" or "file" (radii_file)
     polydispersity: float = 0.0  # relative Gaussian spread of each species' radii (radii=polydisperse)
     radii_file: str = ""  # text or .npy file of the N radii [a] (radii=file)
+    elastic_unloading: bool = False  # a sliding contact whose sliding reverses sticks (implicit only)
 
     # the parameters above in the order a file stores them, and those stored only off their defaults:
     # a 2D stress-controlled bidisperse run stores exactly what it stored before they existed
     STORED_TAIL = ()
-    LATER_PARAMS = ("control", "shear_rate", "radii", "polydispersity", "radii_file")
+    LATER_PARAMS = ("control", "shear_rate", "radii", "polydispersity", "radii_file", "elastic_unloading")
 
     def __post_init__(self) -> None:
         self.validate()
@@ -211,6 +212,12 @@ class SimParams:
         check("initial_min_gap", 0.0 <= self.initial_min_gap <= 0.1, "0 <= initial_min_gap <= 0.1")
         check("seed", isinstance(self.seed, int) and self.seed >= 0, "integer seed >= 0")
         check("n_particles", isinstance(self.n_particles, int) and self.n_particles >= 2, "integer >= 2")
+        check(
+            "elastic_unloading",
+            isinstance(self.elastic_unloading, bool)
+            and (self.integrator == "implicit" or not self.elastic_unloading),
+            "true or false; true needs sim.integrator=implicit (its spring holds the contact that sticks)",
+        )
         check("control", self.control in CONTROLS, f"one of {CONTROLS}")
         check("shear_rate", self.shear_rate > 0.0, "shear_rate > 0 (gamma0_dot)")
         check("radii", self.radii in RADII, f"one of {RADII}")
