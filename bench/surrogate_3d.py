@@ -37,6 +37,8 @@ from bench.surrogate_per_phi import stats
 from rheograph.learn.report import per_subset_scores
 from rheograph.learn.train import read_fold_predictions
 
+ROOT = Path(__file__).resolve().parents[1]
+
 # (metric key, column) of the three targets, and (key prefix of the folds' metrics, row name)
 METRICS = (("r2_log_eta", "R² log η_r"), ("r2_log_pressure", "R² log Π"), ("r2_z_mu", "R² Z_μ"))
 PREDICTORS = (
@@ -68,13 +70,26 @@ def read_run(folder: Path) -> dict:
     for fold in folds:
         with np.load(folder / f"fold{fold['fold']}_predictions.npz") as predictions:
             snapshots += predictions["true"].shape[0]
+    n, phi = int(match.group(1)), float(match.group(2))
+    # the trajectories it was trained on: every run of the set at (N, phi) unless the split says otherwise
+    split = json.loads((folder / f"fold{folds[0]['fold']}_split.json").read_text())
+    pattern = f"data/flow_curves_3d/multirun/N{n}_phi{phi:g}_*/trajectory.h5"
+    every_run = sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(pattern))
+    files = f"'data.files={pattern}'" if sorted(split["files"]) == every_run else files_override(split["files"])
     return {
-        "n": int(match.group(1)),
-        "phi": float(match.group(2)),
+        "n": n,
+        "phi": phi,
+        "files": files,
         "folds": folds,
         "trajectories": int(sum(fold["test/n_runs"] for fold in folds)),
         "snapshots": snapshots,
     }
+
+
+def files_override(files: list[str]) -> str:
+    """``data.files`` as an explicit list of run folders: a model trained on part of the runs at its φ."""
+    runs = ",".join(f'"{Path(f).parent.as_posix()}/trajectory.h5"' for f in sorted(files))
+    return f"'data.files=[{runs}]'"
 
 
 def cell(folds: list[dict], key: str) -> str:
@@ -100,7 +115,7 @@ def section(runs: list[dict], command: str) -> Section:
         out.add(
             f"    python train.py experiment=demo data.phi={phi:g} data.n_particles={n} fold_workers=1 \\",
             "        output_root=outputs/surrogate_3d \\",
-            f"        'data.files=data/flow_curves_3d/multirun/N{n}_phi{phi:g}_*/trajectory.h5'",
+            f"        {run['files']}",
             f"    python -m rheograph.learn.registry ship RUN --name N{n}_phi{phi:.2f}_3d",
             "",
         )
