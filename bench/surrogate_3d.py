@@ -75,7 +75,8 @@ def read_run(folder: Path) -> dict:
     split = json.loads((folder / f"fold{folds[0]['fold']}_split.json").read_text())
     pattern = f"data/flow_curves_3d/multirun/N{n}_phi{phi:g}_*/trajectory.h5"
     every_run = sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(pattern))
-    files = f"'data.files={pattern}'" if sorted(split["files"]) == every_run else files_override(split["files"])
+    trained = sorted(split["files"])
+    files = f"'data.files={pattern}'" if trained == every_run else files_override(trained)
     return {
         "n": n,
         "phi": phi,
