@@ -1,13 +1,17 @@
 """Does elastic unloading change the steady rheology of a committed run?  Continue a trajectory of the 3D
-flow-curve set from its last checkpoint with ``sim.elastic_unloading=true`` (the file is read, never
-written) and compare the steady η_r and Z_μ over the continuation with the run's own over strain >= 1.
+flow-curve set from its last checkpoint with ``sim.elastic_unloading=true`` (or, ``--rule lfdem``, with the
+run's own rule, for the step it takes there; the file is read, never written) and compare the continuation's
+η_r and Z_μ with the run's own steady values (``rheograph.analysis.steady``, strain >= its
+``steady_state_strain``).
 
     python -m bench.unloading_continuation \\
         data/flow_curves_3d/multirun/N500_phi0.58_s200_seed1_d0.002_implicit_3d/trajectory.h5 --strain 1
 
 η_r of the continuation is σ Δt / Δγ over the whole window (the time average of the rate, as the runner's
-steady value), with the standard error of five equal-strain blocks; the run's own is the same estimator
-over its time series from strain 1.  Prints one JSON object; CPU seconds and steps per strain included.
+steady value), with the standard error of five equal-strain blocks.  A packing at rest never reaches
+``--strain``: ``--max-steps`` ends the continuation there and the output says so (``stopped_at_max_steps``);
+its median dt and first shear rates show how it steps.  Prints one JSON object; CPU seconds and steps per
+strain included.
 """
 
 from __future__ import annotations
@@ -21,26 +25,38 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.io.hdf5 import read_checkpoint, read_timeseries
+from rheograph.analysis.steady import steady_state_summary
+from rheograph.errors import InputError
+from rheograph.io.hdf5 import is_trajectory, read_checkpoint, read_timeseries
 from rheograph.sim.integrator3d import Simulation3D
 
 BLOCKS = 5
+FIRST_RATES = 6  # shear rates of the first steps, printed: a chattering packing alternates their sign
 
 
-def continuation(path: Path, strain: float, disp_max: float | None) -> dict:
-    params, state = read_checkpoint(path)
+def continuation(
+    path: Path, strain: float, disp_max: float | None, unloading: bool = True, max_steps: int = 10**6
+) -> dict:
+    if not is_trajectory(path):
+        sys.exit(f"unloading_continuation: {path} is not a rheograph trajectory file")
+    try:
+        params, state = read_checkpoint(path)
+    except InputError as err:
+        sys.exit(f"unloading_continuation: {err}")
     if params.DIM != 3:
         sys.exit(f"unloading_continuation: {path} is a 2D run; this benchmark continues 3D runs")
-    changed = {"elastic_unloading": True, "integrator": "implicit"}
+    changed = {"elastic_unloading": unloading, "integrator": "implicit"}
     if disp_max is not None:
         changed["disp_max"] = disp_max
     sim = Simulation3D(dataclasses.replace(params, **changed), state)
     start, cpu0 = state.strain, time.process_time()
     time_total = strain_total = z_mu_weighted = 0.0
-    blocks, block_time, block_strain, steps = [], 0.0, 0.0, 0
-    while strain_total < strain:
+    blocks, block_time, block_strain, steps, dts, rates = [], 0.0, 0.0, 0, [], []
+    while strain_total < strain and steps < max_steps:
         result = sim.step()
         steps += 1
+        dts.append(result.dt)
+        rates.append(result.shear_rate)
         d_strain = result.shear_rate * result.dt
         time_total += result.dt
         strain_total += d_strain
@@ -50,22 +66,31 @@ def continuation(path: Path, strain: float, disp_max: float | None) -> dict:
         if strain_total >= strain * (len(blocks) + 1) / BLOCKS:
             blocks.append(params.stress * block_time / block_strain)
             block_time = block_strain = 0.0
-    series = read_timeseries(path)
-    steady = series["strain"] >= params.steady_state_strain
-    s, t = series["strain"][steady], series["time"][steady]
+    own = read_timeseries(path)
+    steady = steady_state_summary(
+        own["strain"], own["time"], own["pressure"], own["z_mu"], own["z"], params.stress,
+        params.steady_state_strain,
+    )  # fmt: skip
+    moved = bool(strain_total > 0.0)
     return {
         "run": str(path),
+        "elastic_unloading": unloading,
         "disp_max": sim.params.disp_max,
         "strain_window": [start, start + strain_total],
-        "steps_per_strain": steps / strain_total,
+        "stopped_at_max_steps": bool(strain_total < strain),
+        "steps": steps,
+        "steps_per_strain": steps / strain_total if moved else float("inf"),
+        "median_dt": float(np.median(dts)),
+        "first_shear_rates": [float(r) for r in rates[:FIRST_RATES]],
         "cpu_seconds": time.process_time() - cpu0,
-        "eta_r": params.stress * time_total / strain_total,
+        "eta_r": params.stress * time_total / strain_total if moved else float("inf"),
         "eta_r_blocks": blocks,
-        "eta_r_se": float(np.std(blocks, ddof=1) / np.sqrt(len(blocks))),
-        "z_mu": z_mu_weighted / strain_total,
-        "run_eta_r": float(params.stress * (t[-1] - t[0]) / (s[-1] - s[0])),
-        "run_z_mu": float(series["z_mu"][steady].mean()),
-        "run_window": [float(s[0]), float(s[-1])],
+        "eta_r_se": float(np.std(blocks, ddof=1) / np.sqrt(len(blocks))) if len(blocks) > 1 else float("nan"),
+        "z_mu": z_mu_weighted / strain_total if moved else float("nan"),
+        "run_eta_r": steady["viscosity"],
+        "run_eta_r_se": steady["viscosity_se"],
+        "run_z_mu": steady["z_mu"],
+        "run_window": [params.steady_state_strain, float(own["strain"][-1])],
     }
 
 
@@ -74,12 +99,20 @@ def main(argv=None) -> None:
     ap.add_argument("trajectory", type=Path, help="a 3D trajectory file with a checkpoint")
     ap.add_argument("--strain", type=float, default=1.0, help="strain of the continuation")
     ap.add_argument("--disp-max", type=float, default=None, help="another step (default: the run's)")
+    ap.add_argument(
+        "--rule", choices=("unloading", "lfdem"), default="unloading",
+        help="stick-slip rule of the continuation: elastic unloading, or LF_DEM's (the set's own)",
+    )  # fmt: skip
+    ap.add_argument("--max-steps", type=int, default=10**6, help="end here if --strain is not reached")
     args = ap.parse_args(argv)
     if not args.trajectory.is_file():
         sys.exit(f"unloading_continuation: no trajectory file {args.trajectory}")
     if not args.strain > 0.0:
         sys.exit(f"unloading_continuation: --strain {args.strain} must be > 0")
-    print(json.dumps(continuation(args.trajectory, args.strain, args.disp_max), indent=1))
+    if args.max_steps < 1:
+        sys.exit(f"unloading_continuation: --max-steps {args.max_steps} must be >= 1")
+    out = continuation(args.trajectory, args.strain, args.disp_max, args.rule == "unloading", args.max_steps)
+    print(json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":

@@ -23,6 +23,17 @@ def test_a_continuation_reads_the_run_leaves_it_as_it_was_and_averages_over_its_
     # the whole window's time average lies within its blocks' (each a time average over 1/5 of it)
     assert min(out["eta_r_blocks"]) <= out["eta_r"] <= max(out["eta_r_blocks"])
     assert out["run_window"][0] >= 1.0 and 20 < out["run_eta_r"] < 60  # phi 0.50, sigma/sigma0 10: ~36
+    assert not out["stopped_at_max_steps"] and out["elastic_unloading"]
+
+
+def test_a_packing_at_rest_ends_at_max_steps_and_says_so():
+    """The committed phi 0.60 run has come to rest: the continuation stops at --max-steps instead of
+    hanging, and with LF_DEM's rule its shear rate flips sign every step (the chatter)."""
+    rest = ROOT / "data/flow_curves_3d/multirun/N500_phi0.6_s200_seed1_d0.002_implicit_3d/trajectory.h5"
+    out = continuation(rest, strain=0.01, disp_max=None, unloading=False, max_steps=6)
+    assert out["stopped_at_max_steps"] and out["steps"] == 6
+    rates = out["first_shear_rates"]
+    assert all(a * b < 0 for a, b in zip(rates, rates[1:]))
 
 
 def test_a_2d_run_is_refused_in_one_line(capsys):
