@@ -11,7 +11,15 @@ run's own rule, for the step it takes there; the file is read, never written) an
 steady value), with the standard error of five equal-strain blocks.  A packing at rest never reaches
 ``--strain``: ``--max-steps`` ends the continuation there and the output says so (``stopped_at_max_steps``);
 its median dt and first shear rates show how it steps.  Prints one JSON object; CPU seconds and steps per
-strain included.
+strain included; a line per block on stderr as it goes.
+
+``--record SECTION`` keeps the result as one row of the published table ``SECTION`` (its record under
+docs/results/bench/, page ``--page`` the first time): a study of one checkpoint at several rules and steps
+is built one continuation at a time, each row with the command that made it, the run's own steady values
+as the first row.  A row of the same run, rule, step and strain is replaced::
+
+    python -m bench.unloading_continuation RUN --strain 0.5 --disp-max 1e-3 --rule lfdem \\
+        --record unloading_convergence_3d --page jamming.md
 """
 
 from __future__ import annotations
@@ -19,15 +27,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from bench.publishing import OUT_ENV, RECORDS, Section, command_line, publish, record_path
 from rheograph.analysis.steady import steady_state_summary
 from rheograph.errors import InputError
 from rheograph.io.hdf5 import is_trajectory, read_checkpoint, read_timeseries
+from rheograph.io.pages import read_record
 from rheograph.sim.integrator3d import Simulation3D
 
 BLOCKS = 5
@@ -66,6 +77,13 @@ def continuation(
         if strain_total >= strain * (len(blocks) + 1) / BLOCKS:
             blocks.append(params.stress * block_time / block_strain)
             block_time = block_strain = 0.0
+            # progress on stderr: a continuation near jamming runs for an hour
+            print(
+                f"unloading_continuation: block {len(blocks)}/{BLOCKS}: strain +{strain_total:.3f}, "
+                f"{steps} steps, {time.process_time() - cpu0:.0f} CPU s, eta_r {blocks[-1]:.4g}",
+                file=sys.stderr,
+                flush=True,
+            )
     own = read_timeseries(path)
     steady = steady_state_summary(
         own["strain"], own["time"], own["pressure"], own["z_mu"], own["z"], params.stress,
@@ -94,6 +112,53 @@ def continuation(
     }
 
 
+RULES = {True: "elastic unloading", False: "LF_DEM's"}
+
+
+def _row_key(result: dict) -> tuple:
+    return (result["run"], result["elastic_unloading"], result["disp_max"], round(result["strain_window"][1]
+            - result["strain_window"][0], 2))  # fmt: skip
+
+
+def record_rows(section: str, result: dict, command: str, page: str | None, write: bool = True) -> dict:
+    """Add ``result`` (with the ``command`` that made it) to the continuations of the published table
+    ``section`` (replacing one of the same run, rule, step and strain) and publish the table."""
+    path = record_path(section, Path(os.environ.get(OUT_ENV) or RECORDS))
+    kept = read_record(path, f"record of {section}")["continuations"] if path.exists() else []
+    if kept and kept[0]["run"] != result["run"]:
+        sys.exit(
+            f"unloading_continuation: {section} holds continuations of {kept[0]['run']}; "
+            f"record {result['run']} under another --record name"
+        )
+    rows = [r for r in kept if _row_key(r) != _row_key(result)] + [{**result, "command": command}]
+    rows.sort(key=lambda r: (r["elastic_unloading"], -r["disp_max"]))
+    first = rows[0]
+    sec = Section(
+        f"Continuations of `{first['run']}` from its last checkpoint "
+        f"(strain {first['strain_window'][0]:.2f}), each with one stick–slip rule and step; "
+        "η_r = σ Δt/Δγ over the continuation (± the standard error of five equal-strain blocks), "
+        "Z_μ its strain average; the first row is the run's own "
+        "steady value (`rheograph.analysis.steady`).  CPU: one core of a 2-core machine shared with other "
+        "runs."
+    )
+    table = [[
+        f"the run itself ({RULES[False]})", "", f"{first['run_window'][0]:g}–{first['run_window'][1]:g}",
+        f"{first['run_eta_r']:.0f} ± {first['run_eta_r_se']:.0f}", f"{first['run_z_mu']:.2f}", "", "", "",
+    ]]  # fmt: skip
+    for r in rows:
+        a, b = r["strain_window"]
+        table.append([
+            RULES[r["elastic_unloading"]], f"{r['disp_max']:g}", f"+{b - a:.2f}",
+            f"{r['eta_r']:.0f} ± {r['eta_r_se']:.0f}", f"{r['z_mu']:.2f}", f"{r['steps_per_strain']:.3g}",
+            f"{r['median_dt']:.2g}", f"{r['cpu_seconds'] / (b - a):.0f}",
+        ])  # fmt: skip
+    sec.table(
+        ["rule", "disp_max", "strain", "η_r", "Z_μ", "steps/strain", "median dt", "CPU s/strain"], table
+    )
+    sec.add("", "Commands (one per row):", "", *[f"    {r['command']}" for r in rows])
+    return publish(section, sec, write, page=page, record={"continuations": rows}, command=None)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("trajectory", type=Path, help="a 3D trajectory file with a checkpoint")
@@ -104,6 +169,8 @@ def main(argv=None) -> None:
         help="stick-slip rule of the continuation: elastic unloading, or LF_DEM's (the set's own)",
     )  # fmt: skip
     ap.add_argument("--max-steps", type=int, default=10**6, help="end here if --strain is not reached")
+    ap.add_argument("--record", metavar="SECTION", help="keep the result as a row of this published table")
+    ap.add_argument("--page", help="the docs page of --record's table (the first time)")
     args = ap.parse_args(argv)
     if not args.trajectory.is_file():
         sys.exit(f"unloading_continuation: no trajectory file {args.trajectory}")
@@ -111,8 +178,12 @@ def main(argv=None) -> None:
         sys.exit(f"unloading_continuation: --strain {args.strain} must be > 0")
     if args.max_steps < 1:
         sys.exit(f"unloading_continuation: --max-steps {args.max_steps} must be >= 1")
+    if args.page and not args.record:
+        sys.exit("unloading_continuation: --page names the page of a --record table; give --record too")
     out = continuation(args.trajectory, args.strain, args.disp_max, args.rule == "unloading", args.max_steps)
     print(json.dumps(out, indent=1))
+    if args.record:
+        record_rows(args.record, out, command_line("unloading_continuation", argv), args.page)
 
 
 if __name__ == "__main__":
