@@ -45,6 +45,19 @@ BLOCKS = 5
 FIRST_RATES = 6  # shear rates of the first steps, printed: a chattering packing alternates their sign
 
 
+def last_block_viscosity(path: Path, span: float, stress: float) -> dict:
+    """η_r = σ Δt/Δγ of a run over the last ``span`` of strain its time series holds: the run's own
+    value just before its checkpoint, to set against a continuation's first block (near jamming η_r
+    wanders by several times between windows of 0.1 strain)."""
+    own = read_timeseries(path)
+    strain, t = own["strain"], own["time"]
+    first = int(np.searchsorted(strain, strain[-1] - span))
+    return {
+        "run_last_block_window": [float(strain[first]), float(strain[-1])],
+        "run_last_block_eta_r": float(stress * (t[-1] - t[first]) / (strain[-1] - strain[first])),
+    }
+
+
 def continuation(
     path: Path, strain: float, disp_max: float | None, unloading: bool = True, max_steps: int = 10**6
 ) -> dict:
@@ -109,6 +122,7 @@ def continuation(
         "run_eta_r_se": steady["viscosity_se"],
         "run_z_mu": steady["z_mu"],
         "run_window": [params.steady_state_strain, float(own["strain"][-1])],
+        **last_block_viscosity(path, strain / BLOCKS, params.stress),
     }
 
 
@@ -136,25 +150,33 @@ def record_rows(section: str, result: dict, command: str, page: str | None, writ
     sec = Section(
         f"Continuations of `{first['run']}` from its last checkpoint "
         f"(strain {first['strain_window'][0]:.2f}), each with one stick–slip rule and step; "
-        "η_r = σ Δt/Δγ over the continuation (± the standard error of five equal-strain blocks), "
-        "Z_μ its strain average; the first row is the run's own "
-        "steady value (`rheograph.analysis.steady`).  CPU: one core of a 2-core machine shared with other "
-        "runs."
+        "η_r = σ Δt/Δγ over the continuation (± the standard error of five equal-strain blocks) and "
+        "the mean of its last four blocks (the first holds the response to a change of rule), Z_μ its "
+        "strain average; the first rows are the run's own steady value (`rheograph.analysis.steady`) "
+        "and its η_r over the last block-length of strain before the checkpoint.  "
+        "CPU: one core of a 2-core machine shared with other runs.",
+        "",
     )
+    a, b = first["run_last_block_window"]
     table = [[
-        f"the run itself ({RULES[False]})", "", f"{first['run_window'][0]:g}–{first['run_window'][1]:g}",
-        f"{first['run_eta_r']:.0f} ± {first['run_eta_r_se']:.0f}", f"{first['run_z_mu']:.2f}", "", "", "",
+        f"the run itself ({RULES[False]})", "", f"{first['run_window'][0]:g}–{first['run_window'][1]:.2f}",
+        f"{first['run_eta_r']:.0f} ± {first['run_eta_r_se']:.0f}", "", f"{first['run_z_mu']:.2f}", "", "", "",
+    ], [
+        "the run itself, its last block", "", f"{a:.2f}–{b:.2f}", f"{first['run_last_block_eta_r']:.0f}",
+        "", "", "", "", "",
     ]]  # fmt: skip
     for r in rows:
         a, b = r["strain_window"]
+        later = np.asarray(r["eta_r_blocks"][1:])
         table.append([
             RULES[r["elastic_unloading"]], f"{r['disp_max']:g}", f"+{b - a:.2f}",
-            f"{r['eta_r']:.0f} ± {r['eta_r_se']:.0f}", f"{r['z_mu']:.2f}", f"{r['steps_per_strain']:.3g}",
-            f"{r['median_dt']:.2g}", f"{r['cpu_seconds'] / (b - a):.0f}",
+            f"{r['eta_r']:.0f} ± {r['eta_r_se']:.0f}",
+            f"{later.mean():.0f} ± {later.std(ddof=1) / np.sqrt(later.size):.0f}" if later.size > 1 else "–",
+            f"{r['z_mu']:.2f}", f"{r['steps_per_strain']:.3g}", f"{r['median_dt']:.2g}",
+            f"{r['cpu_seconds'] / (b - a):.0f}",
         ])  # fmt: skip
-    sec.table(
-        ["rule", "disp_max", "strain", "η_r", "Z_μ", "steps/strain", "median dt", "CPU s/strain"], table
-    )
+    header = ["rule", "disp_max", "strain", "η_r", "η_r, blocks 2–5", "Z_μ", "steps/strain", "median dt"]
+    sec.table([*header, "CPU s/strain"], table)
     sec.add("", "Commands (one per row):", "", *[f"    {r['command']}" for r in rows])
     return publish(section, sec, write, page=page, record={"continuations": rows}, command=None)
 

@@ -4,6 +4,7 @@ time, each with the command that made it."""
 import pytest
 
 from bench.publishing import OUT_ENV
+from bench.records import render_section
 from bench.unloading_continuation import record_rows
 from rheograph.io.pages import read_record
 
@@ -16,7 +17,7 @@ def result(unloading: bool, disp_max: float, eta_r: float, run: str = RUN) -> di
         "stopped_at_max_steps": False, "steps": 1000, "steps_per_strain": 2000.0, "median_dt": 1e-4,
         "first_shear_rates": [1.0], "cpu_seconds": 100.0, "eta_r": eta_r, "eta_r_blocks": [eta_r] * 5,
         "eta_r_se": 10.0, "z_mu": 3.7, "run_eta_r": 1307.0, "run_eta_r_se": 115.0, "run_z_mu": 3.67,
-        "run_window": [1.0, 3.0],
+        "run_window": [1.0, 3.0], "run_last_block_window": [2.89, 2.99], "run_last_block_eta_r": 3150.0,
     }  # fmt: skip
 
 
@@ -33,6 +34,8 @@ def test_rows_accumulate_sorted_a_repeat_replaces_its_row_and_another_run_is_ref
     rows = read_record(tmp_path / "conv.json", "record")["continuations"]
     assert len(rows) == 3 and rows[2]["eta_r"] == 3900.0 and rows[2]["command"] == "cmd unloading 1e-3 again"
     text = (tmp_path / "conv.json").read_text()
-    assert "1307 ± 115" in text and "3900 ± 10" in text and "cmd lfdem 1e-3" in text
+    assert "1307 ± 115" in text and "3900 ± 10" in text and "3900 ± 0" in text and "cmd lfdem 1e-3" in text
+    page = render_section(read_record(tmp_path / "conv.json", "record"))
+    assert "| the run itself, its last block | | 2.89–2.99 | 3150 |" in page  # against a first block
     with pytest.raises(SystemExit, match="holds continuations of"):
         record_rows("conv", result(True, 1e-3, 1.0, run="other.h5"), "cmd", page="jamming.md")
