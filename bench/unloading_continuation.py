@@ -46,12 +46,13 @@ FIRST_RATES = 6  # shear rates of the first steps, printed: a chattering packing
 
 
 def last_block_viscosity(path: Path, span: float, stress: float) -> dict:
-    """η_r = σ Δt/Δγ of a run over the last ``span`` of strain its time series holds: the run's own
+    """η_r = σ Δt/Δγ of a run over (at least) the last ``span`` of strain its time series holds: the run's own
     value just before its checkpoint, to set against a continuation's first block (near jamming η_r
     wanders by several times between windows of 0.1 strain)."""
     own = read_timeseries(path)
     strain, t = own["strain"], own["time"]
-    first = int(np.searchsorted(strain, strain[-1] - span))
+    # the last row at or before strain[-1] - span: at least ``span``, however sparse the rows
+    first = max(int(np.searchsorted(strain, strain[-1] - span, side="right")) - 1, 0)
     return {
         "run_last_block_window": [float(strain[first]), float(strain[-1])],
         "run_last_block_eta_r": float(stress * (t[-1] - t[first]) / (strain[-1] - strain[first])),

@@ -23,6 +23,10 @@ def test_a_continuation_reads_the_run_leaves_it_as_it_was_and_averages_over_its_
     # the whole window's time average lies within its blocks' (each a time average over 1/5 of it)
     assert min(out["eta_r_blocks"]) <= out["eta_r"] <= max(out["eta_r_blocks"])
     assert out["run_window"][0] >= 1.0 and 20 < out["run_eta_r"] < 60  # phi 0.50, sigma/sigma0 10: ~36
+    # the run's own last 0.002 strain (--strain / 5) or, its rows being sparser, its last two rows
+    a, b = out["run_last_block_window"]
+    assert b == pytest.approx(out["run_window"][1]) and 0.002 <= b - a < 0.05
+    assert 10 < out["run_last_block_eta_r"] < 100
     assert not out["stopped_at_max_steps"] and out["elastic_unloading"]
 
 
