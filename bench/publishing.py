@@ -14,7 +14,10 @@ from bench.figures import draw, figures_of
 from bench.records import DOCS, RECORDS, Section, as_blocks, check_record, render_section, table, text
 from rheograph.io.pages import read_record, replace_section, write_record
 
-__all__ = ["Section", "command_line", "publish", "read_result_record", "record_path", "table", "text"]
+__all__ = [
+    "Section", "command_line", "publish", "read_result_record", "record_path", "records_folder", "table",
+    "text",
+]  # fmt: skip
 
 ROOT = Path(__file__).resolve().parents[1]
 # where records go instead (and no page is touched): bench.quick's temporary folder
@@ -48,8 +51,7 @@ def publish(
     ``$RHEOGRAPH_BENCH_OUT`` is set the record goes to that folder and no page or figure is touched.
     Returns the record."""
     out = os.environ.get(OUT_ENV)
-    records = Path(out) if out else RECORDS
-    path = record_path(section, records)
+    path = record_path(section, records_folder())
     if page is None:
         known = record_path(section)
         page = read_record(known, f"record of {section}")["page"] if known.exists() else None
@@ -69,6 +71,12 @@ def publish(
             for figure in figures_of(path.name):  # the figures this record holds the numbers of
                 draw(figure)
     return full
+
+
+def records_folder() -> Path:
+    """Where :func:`publish` keeps records: docs/results/bench/, or ``$RHEOGRAPH_BENCH_OUT`` where set."""
+    out = os.environ.get(OUT_ENV)
+    return Path(out) if out else RECORDS
 
 
 def record_path(name: str, records: Path = RECORDS) -> Path:

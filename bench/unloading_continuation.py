@@ -27,14 +27,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from bench.publishing import OUT_ENV, RECORDS, Section, command_line, publish, record_path
+from bench.publishing import Section, command_line, publish, record_path, records_folder
 from rheograph.analysis.steady import steady_state_summary
 from rheograph.errors import InputError
 from rheograph.io.hdf5 import is_trajectory, read_checkpoint, read_timeseries
@@ -45,12 +44,10 @@ BLOCKS = 5
 FIRST_RATES = 6  # shear rates of the first steps, printed: a chattering packing alternates their sign
 
 
-def last_block_viscosity(path: Path, span: float, stress: float) -> dict:
-    """η_r = σ Δt/Δγ of a run over (at least) the last ``span`` of strain its time series holds: the run's own
-    value just before its checkpoint, to set against a continuation's first block (near jamming η_r
-    wanders by several times between windows of 0.1 strain)."""
-    own = read_timeseries(path)
-    strain, t = own["strain"], own["time"]
+def last_block_viscosity(strain: np.ndarray, t: np.ndarray, span: float, stress: float) -> dict:
+    """η_r = σ Δt/Δγ of a run over (at least) the last ``span`` of strain of its time series (``strain``,
+    ``t``: its rows): the run's own value just before its checkpoint, to set against a continuation's first
+    block (near jamming η_r wanders by several times between windows of 0.1 strain)."""
     # the last row at or before strain[-1] - span: at least ``span``, however sparse the rows
     first = max(int(np.searchsorted(strain, strain[-1] - span, side="right")) - 1, 0)
     return {
@@ -123,7 +120,7 @@ def continuation(
         "run_eta_r_se": steady["viscosity_se"],
         "run_z_mu": steady["z_mu"],
         "run_window": [params.steady_state_strain, float(own["strain"][-1])],
-        **last_block_viscosity(path, strain / BLOCKS, params.stress),
+        **last_block_viscosity(own["strain"], own["time"], strain / BLOCKS, params.stress),
     }
 
 
@@ -135,11 +132,16 @@ def _row_key(result: dict) -> tuple:
             - result["strain_window"][0], 2))  # fmt: skip
 
 
-def record_rows(section: str, result: dict, command: str, page: str | None, write: bool = True) -> dict:
+def record_rows(section: str, result: dict, command: str, page: str | None) -> dict:
     """Add ``result`` (with the ``command`` that made it) to the continuations of the published table
     ``section`` (replacing one of the same run, rule, step and strain) and publish the table."""
-    path = record_path(section, Path(os.environ.get(OUT_ENV) or RECORDS))
-    kept = read_record(path, f"record of {section}")["continuations"] if path.exists() else []
+    if result["stopped_at_max_steps"]:
+        sys.exit(f"unloading_continuation: stopped at --max-steps; not recorded in {section}")
+    path = record_path(section, records_folder())
+    kept = read_record(path, f"record of {section}") if path.exists() else {"continuations": []}
+    if "continuations" not in kept:
+        sys.exit(f"unloading_continuation: {path} is another benchmark's record; choose another --record")
+    kept = kept["continuations"]
     if kept and kept[0]["run"] != result["run"]:
         sys.exit(
             f"unloading_continuation: {section} holds continuations of {kept[0]['run']}; "
@@ -179,7 +181,7 @@ def record_rows(section: str, result: dict, command: str, page: str | None, writ
     header = ["rule", "disp_max", "strain", "η_r", "η_r, blocks 2–5", "Z_μ", "steps/strain", "median dt"]
     sec.table([*header, "CPU s/strain"], table)
     sec.add("", "Commands (one per row):", "", *[f"    {r['command']}" for r in rows])
-    return publish(section, sec, write, page=page, record={"continuations": rows}, command=None)
+    return publish(section, sec, True, page=page, record={"continuations": rows}, command=None)
 
 
 def main(argv=None) -> None:

@@ -39,3 +39,14 @@ def test_rows_accumulate_sorted_a_repeat_replaces_its_row_and_another_run_is_ref
     assert "| the run itself, its last block | | 2.89–2.99 | 3150 |" in page  # against a first block
     with pytest.raises(SystemExit, match="holds continuations of"):
         record_rows("conv", result(True, 1e-3, 1.0, run="other.h5"), "cmd", page="jamming.md")
+
+
+def test_a_continuation_that_stopped_early_or_another_benchmarks_record_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setenv(OUT_ENV, str(tmp_path))
+    at_rest = {**result(True, 1e-3, float("inf")), "stopped_at_max_steps": True}
+    with pytest.raises(SystemExit, match="stopped at --max-steps; not recorded in conv"):
+        record_rows("conv", at_rest, "cmd", page="jamming.md")
+    assert not (tmp_path / "conv.json").exists()
+    (tmp_path / "other.json").write_text('{"section": "other", "blocks": []}')
+    with pytest.raises(SystemExit, match="another benchmark's record"):
+        record_rows("other", result(True, 1e-3, 4000.0), "cmd", page="jamming.md")
