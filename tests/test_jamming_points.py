@@ -21,6 +21,7 @@ from rheograph.analysis.jamming_points import (
     plateau_branch,
     read_runs,
     section_blocks,
+    select_rules,
 )
 from rheograph.errors import InputError
 
@@ -218,6 +219,46 @@ def test_command_line_names_a_bad_index(tmp_path, capsys):
         main([str(bad), "--window", "0"])
     with pytest.raises(InputError, match="--record: give the page too"):
         main([str(bad), "--record", str(tmp_path / "jamming_fits.json")])
+
+
+def _index_entry(phi, seed, eta, unloading=None):
+    params = {"n_particles": 500, "phi": phi, "stress": 200.0, "seed": seed, "mu": 0.5, "dim": 3}
+    if unloading is not None:  # files written before the option carry no elastic_unloading
+        params["elastic_unloading"] = unloading
+    return {"status": "completed", "strain": 3.0, "params": params, "summary": {"viscosity": eta}}
+
+
+def test_a_state_point_run_with_both_stick_slip_rules_is_refused_unless_told_which_to_keep(tmp_path, capsys):
+    """The plateau at 0.53-0.57 in LF_DEM's rule, and 0.57 rerun with elastic unloading (eta_r twice
+    as high): without --mixed-rules the mixed state point is refused by name; "unloading" fits the
+    unloading run there and leaves out the other (reported), "pooled" averages both; state points run
+    with one rule are kept either way."""
+    phis = (0.53, 0.55, 0.56, 0.57)
+    lfdem = [_index_entry(phi, 1, 0.8 * (0.6 - phi) ** -2.0) for phi in phis]
+    unloading = [_index_entry(0.57, 1, 1.6 * (0.6 - 0.57) ** -2.0, unloading=True)]
+    first, second = tmp_path / "set.json", tmp_path / "near.json"
+    first.write_text(json.dumps({"runs": lfdem}))
+    second.write_text(json.dumps({"runs": unloading}))
+    runs = read_runs([first, second])
+    with pytest.raises(InputError, match=r"phi 0.57 sigma/sigma0 200 \(and 0 more.*--mixed-rules unloading"):
+        select_rules(runs, None)
+    with pytest.raises(InputError, match="phi 0.57"):
+        main([str(first), str(second)])
+    kept, left_out = select_rules(runs, "unloading")
+    assert [(r["phi"], r["elastic_unloading"]) for r in left_out] == [(0.57, False)]
+    assert sorted((r["phi"], r["elastic_unloading"]) for r in kept) == [
+        (0.53, False),
+        (0.55, False),
+        (0.56, False),
+        (0.57, True),
+    ]
+    assert select_rules(runs, "pooled") == (runs, [])
+    assert select_rules(runs[:4], None) == (runs[:4], [])  # one rule throughout: nothing to choose
+    main([str(first), str(second), "--mixed-rules", "unloading"])
+    assert (
+        "left out (LF_DEM's rule where elastic unloading ran too): N = 500 phi 0.57"
+        in capsys.readouterr().err
+    )
 
 
 def test_committed_n400_set_the_two_fit_methods_agree_once_branches_keep_their_amplitudes():

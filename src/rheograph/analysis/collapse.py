@@ -26,7 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
-from rheograph.analysis.jamming_points import docs_page, flowing, jamming_table, read_runs
+from rheograph.analysis.jamming_points import (
+    add_mixed_rules_argument,
+    docs_page,
+    flowing,
+    jamming_table,
+    read_runs,
+    select_rules,
+)
 from rheograph.errors import InputError, one_line_errors
 from rheograph.io.figures import save_png
 from rheograph.io.pages import render_blocks, replace_section, table_block, write_record
@@ -263,6 +270,7 @@ def main(argv=None) -> None:
     ap.add_argument("--out", help="markdown file whose <!-- collapse_2d_3d:start/end --> section gets it")
     ap.add_argument("--record", help="JSON record of the section and the figure's numbers")
     ap.add_argument("--figure", help="PNG of the three quantities against the distance to jamming")
+    add_mixed_rules_argument(ap)
     args = ap.parse_args(argv)
     if args.bootstrap < 10:
         raise InputError(f"--bootstrap {args.bootstrap}: at least 10 samples make a 68 % interval")
@@ -270,7 +278,7 @@ def main(argv=None) -> None:
         raise InputError("--record: give the page too (--out), whose section the record draws")
     data = {"method": args.method}
     for side, indexes, dim, n in (("two", args.two, 2, args.n_two), ("three", args.three, 3, args.n_three)):
-        runs = read_runs(indexes)
+        runs, _ = select_rules(read_runs(indexes), args.mixed_rules)
         if any(r["dim"] != dim for r in runs):
             raise InputError(f"--{side}: {indexes} hold runs of another dimension than {dim}")
         fit = frictional_jamming_point(runs, dim, n, args.method, args.bootstrap, args.single_run_error)

@@ -17,6 +17,10 @@ Two fits of the steady relative viscosity of every finished trajectory (``summar
 Jammed runs have no viscosity and enter neither fit; the phase diagram marks them.  A state point with
 one trajectory has nothing to resample; with ``--single-run-error`` its eta_r is drawn from its block
 standard error instead (for a set of one seed per state point, such as the 3D plateau so far).
+
+Near jamming LF_DEM's stick–slip rule needs a finer step than elastic unloading (docs/jamming.md): where a
+state point was run with both rules, ``--mixed-rules unloading`` keeps its elastic-unloading
+trajectories only and ``--mixed-rules pooled`` keeps both; without either, such a state point is refused.
 """
 
 from __future__ import annotations
@@ -68,9 +72,54 @@ def read_runs(index_paths) -> list[dict]:
                     "z": float(s.get("z") if s.get("z") is not None else np.nan),
                     "pressure": float(s.get("pressure") if s.get("pressure") is not None else np.nan),
                     "dim": int(p.get("dim", 2)),
+                    "elastic_unloading": bool(p.get("elastic_unloading", False)),
                 }
             )
     return runs
+
+
+MIXED_RULES = ("unloading", "pooled")
+
+
+def state_point(run: dict) -> tuple:
+    """What makes two trajectories repeats of one state point: dimension, N, phi, stress and mu."""
+    return (run["dim"], run["n"], run["phi"], run["stress"], run["mu"])
+
+
+def select_rules(runs: list[dict], mixed: str | None) -> tuple[list[dict], list[dict]]:
+    """(the runs the fits read, the runs left out) where a state point holds trajectories of both
+    stick–slip rules (``elastic_unloading`` and LF_DEM's): ``mixed="unloading"`` keeps the elastic-unloading
+    ones there, ``"pooled"`` keeps both as repeats; None refuses such a state point (the two rules differ
+    near jamming at the same step, so pooling them must be asked for)."""
+    if mixed is not None and mixed not in MIXED_RULES:
+        raise InputError(f"mixed rules {mixed!r}: allowed {', '.join(MIXED_RULES)}")
+    rules: dict[tuple, set[bool]] = {}
+    for r in runs:
+        rules.setdefault(state_point(r), set()).add(r["elastic_unloading"])
+    mixed_points = sorted(k for k, v in rules.items() if len(v) == 2)
+    if not mixed_points or mixed == "pooled":
+        return runs, []
+    if mixed is None:
+        dim, n, phi, stress, _ = mixed_points[0]
+        raise InputError(
+            f"N = {n} ({dim}D) phi {phi:g} sigma/sigma0 {stress:g} (and {len(mixed_points) - 1} more state "
+            "points) holds runs with and without elastic unloading: pass --mixed-rules unloading (keep "
+            "the elastic-unloading runs there) or --mixed-rules pooled (keep both)"
+        )
+    mixed_set = set(mixed_points)
+    kept = [r for r in runs if state_point(r) not in mixed_set or r["elastic_unloading"]]
+    left_out = [r for r in runs if state_point(r) in mixed_set and not r["elastic_unloading"]]
+    return kept, left_out
+
+
+def add_mixed_rules_argument(ap: argparse.ArgumentParser) -> None:
+    """The ``--mixed-rules`` option of every command that reads run indexes into fits."""
+    ap.add_argument(
+        "--mixed-rules",
+        choices=MIXED_RULES,
+        help="a state point run both with and without elastic unloading: keep its elastic-unloading "
+        "runs only (unloading) or both as repeats (pooled); without it such a state point is refused",
+    )
 
 
 def flowing(run: dict) -> bool:
@@ -591,12 +640,19 @@ def main(argv=None) -> None:
         help="bootstrap: draw the eta_r of a state point with one trajectory from its block standard "
         "error (default: held fixed, so a set of one seed per state point has no interval)",
     )
+    add_mixed_rules_argument(ap)
     args = ap.parse_args(argv)
     if args.record and not args.out:
         raise InputError("--record: give the page too (--out), whose section the record draws")
     if not 0.0 < args.window < 0.5:
         raise InputError(f"--window {args.window}: allowed 0 < window < 0.5")
-    runs = read_runs(args.indexes)
+    runs, left_out = select_rules(read_runs(args.indexes), args.mixed_rules)
+    for r in left_out:
+        print(
+            f"left out (LF_DEM's rule where elastic unloading ran too): N = {r['n']} phi {r['phi']:g} "
+            f"sigma/sigma0 {r['stress']:g} seed {r['seed']}",
+            file=sys.stderr,
+        )
     rows = jamming_table(runs, args.seed, args.window, single_run_error=args.single_run_error)
     if not rows:
         raise InputError(f"{args.indexes}: no branch with three area fractions of flowing runs to fit")
