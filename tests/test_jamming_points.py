@@ -232,7 +232,7 @@ def test_a_state_point_run_with_both_stick_slip_rules_is_refused_unless_told_whi
     """The plateau at 0.53-0.57 in LF_DEM's rule, and 0.57 rerun with elastic unloading (eta_r twice
     as high): without --mixed-rules the mixed state point is refused by name; "unloading" fits the
     unloading run there and leaves out the other (reported), "pooled" averages both; state points run
-    with one rule are kept either way."""
+    with one rule are kept either way, and an unloading run still under way supersedes nothing."""
     phis = (0.53, 0.55, 0.56, 0.57)
     lfdem = [_index_entry(phi, 1, 0.8 * (0.6 - phi) ** -2.0) for phi in phis]
     unloading = [_index_entry(0.57, 1, 1.6 * (0.6 - 0.57) ** -2.0, unloading=True)]
@@ -253,6 +253,8 @@ def test_a_state_point_run_with_both_stick_slip_rules_is_refused_unless_told_whi
         (0.57, True),
     ]
     assert select_rules(runs, "pooled") == (runs, [])
+    under_way = [*runs[:4], {**runs[4], "status": "interrupted"}]
+    assert select_rules(under_way, "unloading") == (under_way, [])  # nothing supersedes LF_DEM's yet
     assert select_rules(runs[:4], None) == (runs[:4], [])  # one rule throughout: nothing to choose
     main([str(first), str(second), "--mixed-rules", "unloading"])
     assert (

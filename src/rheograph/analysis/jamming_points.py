@@ -87,15 +87,17 @@ def state_point(run: dict) -> tuple:
 
 
 def select_rules(runs: list[dict], mixed: str | None) -> tuple[list[dict], list[dict]]:
-    """(the runs the fits read, the runs left out) where a state point holds trajectories of both
-    stick–slip rules (``elastic_unloading`` and LF_DEM's): ``mixed="unloading"`` keeps the elastic-unloading
-    ones there, ``"pooled"`` keeps both as repeats; None refuses such a state point (the two rules differ
-    near jamming at the same step, so pooling them must be asked for)."""
+    """(the runs the fits read, the runs left out) where a state point holds finished trajectories
+    (completed or arrested) of both stick–slip rules (``elastic_unloading`` and LF_DEM's):
+    ``mixed="unloading"`` keeps the elastic-unloading ones there, ``"pooled"`` keeps both as repeats;
+    None refuses such a state point (the two rules differ near jamming at the same step, so pooling
+    them must be asked for).  A run still under way decides nothing."""
     if mixed is not None and mixed not in MIXED_RULES:
         raise InputError(f"mixed rules {mixed!r}: allowed {', '.join(MIXED_RULES)}")
     rules: dict[tuple, set[bool]] = {}
     for r in runs:
-        rules.setdefault(state_point(r), set()).add(r["elastic_unloading"])
+        if r["status"] in ("completed", "jammed"):  # a run still under way supersedes nothing yet
+            rules.setdefault(state_point(r), set()).add(r["elastic_unloading"])
     mixed_points = sorted(k for k, v in rules.items() if len(v) == 2)
     if not mixed_points or mixed == "pooled":
         return runs, []
