@@ -20,6 +20,8 @@ from rheograph.analysis.jamming_points import (
     near,
     plateau_branch,
     read_runs,
+    rule_comparison,
+    rule_comparison_block,
     section_blocks,
     select_rules,
 )
@@ -256,6 +258,21 @@ def test_a_state_point_run_with_both_stick_slip_rules_is_refused_unless_told_whi
     under_way = [*runs[:4], {**runs[4], "status": "interrupted"}]
     assert select_rules(under_way, "unloading") == (under_way, [])  # nothing supersedes LF_DEM's yet
     assert select_rules(runs[:4], None) == (runs[:4], [])  # one rule throughout: nothing to choose
+    (compared,) = rule_comparison([*runs, {**runs[0], "phi": 0.6, "status": "interrupted", "strain": 0.04}])
+    assert (compared["phi"], compared["lfdem"]["runs"], compared["unloading"]["runs"]) == (0.57, 1, 1)
+    assert compared["unloading"]["eta"] / compared["lfdem"]["eta"] == pytest.approx(2.0)
+    arrested = {**runs[4], "phi": 0.6, "status": "jammed", "strain": 0.033}
+    undecided = {**runs[0], "phi": 0.6, "status": "interrupted", "strain": 0.04}
+    cells = rule_comparison_block(rule_comparison([*runs, arrested, undecided]))["table"]["rows"]
+    assert cells[0][-1] == "2.00"
+    assert cells[1][4:] == [
+        "undecided, stopped at strain 0.04",
+        "—",
+        "1",
+        "arrested at strain 0.033",
+        "—",
+        "—",
+    ]
     main([str(first), str(second), "--mixed-rules", "unloading"])
     assert (
         "left out (LF_DEM's rule where elastic unloading ran too): N = 500 phi 0.57"

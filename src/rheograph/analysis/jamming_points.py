@@ -114,6 +114,73 @@ def select_rules(runs: list[dict], mixed: str | None) -> tuple[list[dict], list[
     return kept, left_out
 
 
+def rule_comparison(runs: list[dict]) -> list[dict]:
+    """One record per state point run with both stick–slip rules, one of them to its end: its (dim, N,
+    phi, sigma/sigma0) and, per rule (``lfdem``, ``unloading``), the runs' count, the mean eta_r and Z_mu
+    of those that completed in flow with the standard error of that mean (between seeds; one run's block
+    error), the strains at which runs arrested and those at which runs stopped short of either."""
+    groups: dict[tuple, dict[str, list[dict]]] = {}
+    for r in runs:
+        rule = "unloading" if r["elastic_unloading"] else "lfdem"
+        groups.setdefault(state_point(r), {"lfdem": [], "unloading": []})[rule].append(r)
+    records = []
+    for (dim, n, phi, stress, _), by_rule in sorted(groups.items()):
+        decided = [
+            r for members in by_rule.values() for r in members if r["status"] in ("completed", "jammed")
+        ]
+        if not (by_rule["lfdem"] and by_rule["unloading"] and decided):
+            continue
+        record = {"dim": dim, "n": n, "phi": phi, "stress": stress}
+        for rule, members in by_rule.items():
+            flows = [r for r in members if flowing(r)]
+            eta = np.array([r["eta"] for r in flows])
+            if len(flows) > 1:
+                eta_se = float(np.std(eta, ddof=1) / np.sqrt(len(flows)))
+            else:
+                eta_se = float(flows[0]["eta_se"]) if flows else np.nan
+            record[rule] = {
+                "runs": len(members),
+                "eta": float(eta.mean()) if flows else np.nan,
+                "eta_se": eta_se,
+                "z_mu": float(np.mean([r["z_mu"] for r in flows])) if flows else np.nan,
+                "arrested_at": sorted(r["strain"] for r in members if r["status"] == "jammed"),
+                "stopped_at": sorted(
+                    r["strain"] for r in members if r["status"] not in ("completed", "jammed")
+                ),
+            }
+        records.append(record)
+    return records
+
+
+def rule_comparison_block(records: list[dict]) -> dict:
+    """The table of :func:`rule_comparison` (cells as published)."""
+
+    def cells(side: dict) -> list[str]:
+        parts = []
+        if np.isfinite(side["eta"]):
+            error = f" ± {side['eta_se']:.2g}" if np.isfinite(side["eta_se"]) else ""
+            parts.append(f"{side['eta']:.4g}{error}")
+        if side["arrested_at"]:
+            parts.append("arrested at strain " + ", ".join(f"{x:.3f}" for x in side["arrested_at"]))
+        if side["stopped_at"]:
+            parts.append("undecided, stopped at strain " + ", ".join(f"{x:.3g}" for x in side["stopped_at"]))
+        z_mu = f"{side['z_mu']:.2f}" if np.isfinite(side["z_mu"]) else "—"
+        return [str(side["runs"]), "; ".join(parts), z_mu]
+
+    header = ["N", "φ", "σ/σ0", "runs", "η_r, LF_DEM's rule", "Z_μ", "runs", "η_r, elastic unloading", "Z_μ"]
+    header += ["ratio"]
+    body = []
+    for r in records:
+        ratio = r["unloading"]["eta"] / r["lfdem"]["eta"]
+        body.append(
+            [size_label(r["n"], r["dim"]), f"{r['phi']:g}", f"{r['stress']:g}"]
+            + cells(r["lfdem"])
+            + cells(r["unloading"])
+            + [f"{ratio:.2f}" if np.isfinite(ratio) else "—"]
+        )
+    return table_block(header, body)
+
+
 def add_mixed_rules_argument(ap: argparse.ArgumentParser) -> None:
     """The ``--mixed-rules`` option of every command that reads run indexes into fits."""
     ap.add_argument(
@@ -471,8 +538,9 @@ def jamming_table(
     return rows
 
 
-def section_blocks(rows: list[dict], command: str) -> list[dict]:
-    """The published section: the fits as a table (cells as printed) and the command."""
+def section_blocks(rows: list[dict], command: str, rules: list[dict] | None = None) -> list[dict]:
+    """The published section: the fits as a table (cells as printed), the state points run with both
+    stick–slip rules (``rules``, :func:`rule_comparison`; where there are any) and the command."""
     header = [
         "N",
         "quantity",
@@ -499,7 +567,17 @@ def section_blocks(rows: list[dict], command: str) -> list[dict]:
             + [f"{r['phi_range'][0]:g}–{r['phi_range'][1]:g}", f"{r['phi_j']:.4f} ({low:.4f}–{high:.4f})"]
             + [beta, rms]
         )
-    return [table_block(header, body), {"text": f"\nCommand: `{command}`"}]
+    blocks = [table_block(header, body)]
+    if rules:
+        blocks += [
+            {
+                "text": "\nState points run with both stick–slip rules at the same step (η_r ± the standard "
+                "error of the mean over seeds, or one run's block error; the fits above read the runs "
+                "of the rule `--mixed-rules` keeps):\n"
+            },
+            rule_comparison_block(rules),
+        ]
+    return blocks + [{"text": f"\nCommand: `{command}`"}]
 
 
 def docs_page(path: Path) -> str:
@@ -648,7 +726,8 @@ def main(argv=None) -> None:
         raise InputError("--record: give the page too (--out), whose section the record draws")
     if not 0.0 < args.window < 0.5:
         raise InputError(f"--window {args.window}: allowed 0 < window < 0.5")
-    runs, left_out = select_rules(read_runs(args.indexes), args.mixed_rules)
+    everything = read_runs(args.indexes)
+    runs, left_out = select_rules(everything, args.mixed_rules)
     for r in left_out:
         print(
             f"left out (LF_DEM's rule where elastic unloading ran too): N = {r['n']} phi {r['phi']:g} "
@@ -661,7 +740,7 @@ def main(argv=None) -> None:
     command = "python -m rheograph.analysis.jamming_points " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
-    blocks = section_blocks(rows, command)
+    blocks = section_blocks(rows, command, rule_comparison(everything))
     text = render_blocks(blocks)
     print(text)
     if args.out:
