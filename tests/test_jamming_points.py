@@ -24,6 +24,7 @@ from rheograph.analysis.jamming_points import (
     rule_comparison_block,
     section_blocks,
     select_rules,
+    two_digits,
 )
 from rheograph.errors import InputError
 
@@ -227,7 +228,12 @@ def _index_entry(phi, seed, eta, unloading=None):
     params = {"n_particles": 500, "phi": phi, "stress": 200.0, "seed": seed, "mu": 0.5, "dim": 3}
     if unloading is not None:  # files written before the option carry no elastic_unloading
         params["elastic_unloading"] = unloading
-    return {"status": "completed", "strain": 3.0, "params": params, "summary": {"viscosity": eta}}
+    return {
+        "status": "completed",
+        "strain": 3.0,
+        "params": params,
+        "summary": {"viscosity": eta, "viscosity_se": 0.05 * eta},
+    }
 
 
 def test_a_state_point_run_with_both_stick_slip_rules_is_refused_unless_told_which_to_keep(tmp_path, capsys):
@@ -264,7 +270,8 @@ def test_a_state_point_run_with_both_stick_slip_rules_is_refused_unless_told_whi
     arrested = {**runs[4], "phi": 0.6, "status": "jammed", "strain": 0.033}
     undecided = {**runs[0], "phi": 0.6, "status": "interrupted", "strain": 0.04}
     cells = rule_comparison_block(rule_comparison([*runs, arrested, undecided]))["table"]["rows"]
-    assert cells[0][-1] == "2.00"
+    assert cells[0][-1] == "2.00" and cells[0][4] == "888.9 ± 44"  # 0.8 / 0.03^2, its 5 % block error
+    assert [two_digits(x) for x in (418.7, 38.2, 4.23, 0.0451, 0)] == ["420", "38", "4.2", "0.045", "0"]
     assert cells[1][4:] == [
         "undecided, stopped at strain 0.04",
         "—",

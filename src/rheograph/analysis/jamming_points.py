@@ -152,13 +152,20 @@ def rule_comparison(runs: list[dict]) -> list[dict]:
     return records
 
 
+def two_digits(x: float) -> str:
+    """``x`` rounded to two significant digits, written out (420, 38, 4.2; not 4.2e+02)."""
+    if x == 0:
+        return "0"
+    return f"{round(x, 1 - int(np.floor(np.log10(abs(x))))):g}"
+
+
 def rule_comparison_block(records: list[dict]) -> dict:
     """The table of :func:`rule_comparison` (cells as published)."""
 
     def cells(side: dict) -> list[str]:
         parts = []
         if np.isfinite(side["eta"]):
-            error = f" ± {side['eta_se']:.2g}" if np.isfinite(side["eta_se"]) else ""
+            error = f" ± {two_digits(side['eta_se'])}" if np.isfinite(side["eta_se"]) else ""
             parts.append(f"{side['eta']:.4g}{error}")
         if side["arrested_at"]:
             parts.append("arrested at strain " + ", ".join(f"{x:.3f}" for x in side["arrested_at"]))
