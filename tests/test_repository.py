@@ -12,10 +12,11 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 CHECKOUT_LIMIT_BYTES = 310_000_000  # the 2D training data, models and results included
 # the 3D data (every data/*_3d folder: the flow-curve set towards seven volume fractions, eight stresses and
-# two to three seeds, its polydisperse, jamming and N = 2000 campaigns, and LF_DEM's 3D reference files)
-# grow campaign by campaign: counted apart, within a budget of their own
+# two to three seeds, its polydisperse, jamming, near-jamming and N = 2000 campaigns, and LF_DEM's 3D
+# reference files) grow campaign by campaign: counted apart, within a budget of their own (a finished
+# N = 500 run is 0.6-0.9 MB compacted)
 DATA_3D_GLOB = "data/*_3d"
-DATA_3D_LIMIT_BYTES = 100_000_000
+DATA_3D_LIMIT_BYTES = 115_000_000
 SHIPPED_MODELS_LIMIT_BYTES = 15_000_000
 # the shipped 3D models (per volume fraction, pooled, imaging; each card's domain says dim 3) grow with
 # the 3D set: counted apart, within a budget of their own
