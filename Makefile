@@ -86,6 +86,10 @@ cards: install
 	    --record docs/results/bench/figures/dataset_flow_curves_3d.json \
 	    --title "Dataset card: the 3D flow-curve set (in progress)" \
 	    --command "python simulate.py -m campaign=flow_curves_3d"
+	$(PY) -m rheograph.analysis.dataset_card data/near_jamming_3d --out docs/datasets/near_jamming_3d \
+	    --record docs/results/bench/figures/dataset_near_jamming_3d.json \
+	    --title "Dataset card: the 3D plateau near jamming, with elastic unloading (in progress)" \
+	    --command "python simulate.py -m campaign=near_jamming_3d"
 	$(PY) -m rheograph.analysis.dataset_card data/polydisperse_flow_curves_3d \
 	    --out docs/datasets/polydisperse_flow_curves_3d \
 	    --record docs/results/bench/figures/dataset_polydisperse_flow_curves_3d.json \

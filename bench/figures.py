@@ -320,6 +320,7 @@ def _card(folder: str, dataset: str) -> dict[str, Figure]:
 FIGURES: dict[str, Figure] = {
     **_card("", "paper"),
     **_card("datasets/flow_curves_3d/", "flow_curves_3d"),
+    **_card("datasets/near_jamming_3d/", "near_jamming_3d"),
     **_card("datasets/polydisperse_flow_curves_3d/", "polydisperse_flow_curves_3d"),
     **_card("datasets/jamming/", "jamming"),
     **_card("datasets/large_n/", "large_n"),
