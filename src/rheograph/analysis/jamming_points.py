@@ -78,6 +78,11 @@ def read_runs(index_paths) -> list[dict]:
     return runs
 
 
+def finished(run: dict) -> bool:
+    """A run that reached its end: completed in flow, or arrested (not one stopped short of either)."""
+    return run["status"] in ("completed", "jammed")
+
+
 MIXED_RULES = ("unloading", "pooled")
 
 
@@ -96,7 +101,7 @@ def select_rules(runs: list[dict], mixed: str | None) -> tuple[list[dict], list[
         raise InputError(f"mixed rules {mixed!r}: allowed {', '.join(MIXED_RULES)}")
     rules: dict[tuple, set[bool]] = {}
     for r in runs:
-        if r["status"] in ("completed", "jammed"):  # a run still under way supersedes nothing yet
+        if finished(r):  # a run still under way supersedes nothing yet
             rules.setdefault(state_point(r), set()).add(r["elastic_unloading"])
     mixed_points = sorted(k for k, v in rules.items() if len(v) == 2)
     if not mixed_points or mixed == "pooled":
@@ -125,9 +130,7 @@ def rule_comparison(runs: list[dict]) -> list[dict]:
         groups.setdefault(state_point(r), {"lfdem": [], "unloading": []})[rule].append(r)
     records = []
     for (dim, n, phi, stress, _), by_rule in sorted(groups.items()):
-        decided = [
-            r for members in by_rule.values() for r in members if r["status"] in ("completed", "jammed")
-        ]
+        decided = [r for members in by_rule.values() for r in members if finished(r)]
         if not (by_rule["lfdem"] and by_rule["unloading"] and decided):
             continue
         record = {"dim": dim, "n": n, "phi": phi, "stress": stress}
@@ -144,9 +147,7 @@ def rule_comparison(runs: list[dict]) -> list[dict]:
                 "eta_se": eta_se,
                 "z_mu": float(np.mean([r["z_mu"] for r in flows])) if flows else np.nan,
                 "arrested_at": sorted(r["strain"] for r in members if r["status"] == "jammed"),
-                "stopped_at": sorted(
-                    r["strain"] for r in members if r["status"] not in ("completed", "jammed")
-                ),
+                "stopped_at": sorted(r["strain"] for r in members if not finished(r)),
             }
         records.append(record)
     return records
@@ -230,7 +231,7 @@ def arrest_bracket(branch: list[dict]) -> tuple[float, float, int] | None:
     the branch flows, below the lowest at which every one arrested (runs stopped early count for
     neither).  The jamming point of this box lies between them, whatever the form of the divergence;
     None where no area fraction arrested every run."""
-    decided = [r for r in branch if r["status"] in ("completed", "jammed")]
+    decided = [r for r in branch if finished(r)]
     by_phi: dict[float, list[str]] = {}
     for r in decided:
         by_phi.setdefault(r["phi"], []).append(r["status"])
@@ -258,7 +259,7 @@ def arrest_probability(branch: list[dict]) -> dict | None:
     arrest bracket.  None without both an arrested and a flowing run.
 
     Returns dict(phi_half, interval=(low, high), window, runs, arrested, phi_range)."""
-    decided = [r for r in branch if r["status"] in ("completed", "jammed")]
+    decided = [r for r in branch if finished(r)]
     completed = [r["strain"] for r in decided if r["status"] == "completed"]
     if not completed:
         return None
